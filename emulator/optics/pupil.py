@@ -1,0 +1,104 @@
+"""The apparent pupil: boundary points of the aperture stop seen through the cornea.
+
+Each boundary point P (on the pupil plane z = -(CCT + ACD), eye-local frame, mm) is imaged by the
+one ray that leaves P, refracts at the posterior and then the anterior cornea, and passes through
+the camera's nodal point O. Light paths are reversible, so the solver traces backwards: it takes the
+exit point A = (x, y, sag) on the anterior cornea as the unknown, sends the ray O -> A into the eye
+(refract air -> cornea at A, cornea -> aqueous at the posterior surface), meets the pupil plane at
+P', and drives P' - P to zero with a 2 x 2 Newton iteration (`newton2d`). The image of P is then the
+camera projection of A (the ray A -> O passes through the nodal point).
+
+A boundary point is blocked (invalid) when its exit point falls beyond the limbus, the anterior
+surface faces away from the camera, the ray misses the posterior cornea, or it is totally internally
+reflected.
+
+Known answer (paraxial): a single refracting surface of radius 7.8 mm and index 1.3375 images a pupil
+3.6 mm deep at the entrance pupil of a paraxial ray trace, magnification and depth within 1%.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from emulator.optics.conic import Conic, Plane
+from emulator.optics.newton import newton2d
+from emulator.optics.rays import _dot, refract, unit
+
+PUPIL_TOLERANCE_MM = 1e-6
+
+
+@dataclass(frozen=True)
+class CorneaOptics:
+    """The cornea and pupil plane of one eye or a batch (eye-local frame, mm) and the indices."""
+
+    anterior: Conic
+    posterior: Conic
+    pupil_plane: Plane
+    n_air: np.ndarray
+    n_cornea: np.ndarray
+    n_aqueous: np.ndarray
+
+
+@dataclass(frozen=True)
+class ExitPoints:
+    """Exit points (..., 3) on the anterior cornea, residual (mm) on the pupil plane, validity."""
+
+    point: np.ndarray
+    residual_mm: np.ndarray
+    valid: np.ndarray
+
+
+def trace_into_eye(
+    optics: CorneaOptics, q: np.ndarray, *, source: np.ndarray | None = None, direction: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Where a ray entering the anterior cornea at the point above q (..., 2) meets the pupil plane.
+
+    The ray comes from the point `source` (..., 3) or travels along the unit `direction` (..., 3)."""
+    a, ok = optics.anterior.point(q)
+    d0 = unit(a - source) if direction is None else direction
+    na = optics.anterior.normal(a)
+    ok &= _dot(na, d0) < 0
+    d1, ok1 = refract(d0, na, optics.n_air, optics.n_cornea)
+    t1, ok2 = optics.posterior.intersect(a, d1)
+    b = a + np.nan_to_num(t1)[..., None] * d1
+    d2, ok3 = refract(d1, optics.posterior.normal(b), optics.n_cornea, optics.n_aqueous)
+    t2, ok4 = optics.pupil_plane.intersect(b, d2)
+    p = b + np.nan_to_num(t2)[..., None] * d2
+    return p, ok & ok1 & ok2 & ok3 & ok4
+
+
+def solve_exit_points(optics: CorneaOptics, camera: np.ndarray, target: np.ndarray) -> ExitPoints:
+    """Exit points on the anterior cornea of the rays from pupil points `target` (..., 3) to `camera`."""
+
+    def residual(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        p, ok = trace_into_eye(optics, q, source=camera)
+        return p[..., :2] - target[..., :2], ok
+
+    sol = newton2d(residual, _first_guess(optics, camera, target), max_step=0.5)
+    a, _ = optics.anterior.point(sol.q)
+    miss = np.linalg.norm(sol.residual, axis=-1)
+    valid = sol.ok & (miss <= PUPIL_TOLERANCE_MM)
+    return ExitPoints(point=a, residual_mm=miss, valid=valid)
+
+
+def _first_guess(optics: CorneaOptics, camera: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Aim at the paraxial image of the target (about 1.13x larger, 15% shallower)."""
+    image = target * np.array([1.13, 1.13, 0.85])
+    direction = unit(image - camera)
+    t, ok = optics.anterior.intersect(camera, direction)
+    hit = camera + np.nan_to_num(t)[..., None] * direction
+    return np.where(ok[..., None], hit[..., :2], image[..., :2])
+
+
+def pupil_boundary(centre_xy: np.ndarray, radius: np.ndarray, depth: np.ndarray, n_points: int = 30) -> np.ndarray:
+    """`n_points` evenly spaced points (..., N, 3) on a circle of `radius` about centre_xy (..., 2) at z = depth."""
+    if n_points < 5:
+        raise ValueError("the pupil boundary needs at least 5 points for an ellipse fit")
+    theta = 2.0 * np.pi * np.arange(n_points) / n_points
+    r = np.asarray(radius)[..., None]
+    x = centre_xy[..., 0:1] + r * np.cos(theta)
+    y = centre_xy[..., 1:2] + r * np.sin(theta)
+    z = np.broadcast_to(np.asarray(depth)[..., None], x.shape)
+    return np.stack([x, y, z], axis=-1)
