@@ -22,7 +22,8 @@ ARRAYS: dict[str, tuple[str, type]] = {
     "pupil_valid": ("", bool), "pupil_points_px": ("N2", float), "pupil_points_valid": ("N", bool),
     "pupil_residual_mm": ("", float), "glint_px": ("L2", float), "glint_valid": ("L", bool),
     "glint_residual_mm": ("L", float), "azimuth_deg": ("", float), "elevation_deg": ("", float),
-    "torsion_deg": ("", float), "in_image": ("", bool), "fixation_residual_mm": ("", float), "fixation_valid": ("", bool),
+    "torsion_deg": ("", float), "in_image": ("", bool), "fixation_residual_mm": ("", float),
+    "fixation_valid": ("", bool),
     "cornea_centre": ("3", float), "pupil_centre": ("3", float), "apex": ("3", float), "fovea": ("3", float),
     "los_origin": ("3", float), "optic_axis": ("3", float), "visual_axis": ("3", float),
 }

@@ -67,11 +67,11 @@ def common_direction(o: np.ndarray, leds: np.ndarray, e: np.ndarray) -> np.ndarr
 
 
 def reflection_residuals(k_c: np.ndarray, o: np.ndarray, leds: np.ndarray, e: np.ndarray, b: np.ndarray, R) -> np.ndarray:
-    """f_i(k_c) (..., n) mm of thesis 3.8 for c = o + k_c b^; NaN where a glint ray misses the sphere."""
+    """f_i(k_c) (..., n) mm of thesis 3.8 for c = o + k_c b^ (beyond grazing, q is the tangent point)."""
     k = np.asarray(k_c)[..., None]
     eb = _dot(e, b[..., None, :])
     R = np.asarray(R)[..., None]
-    k_q = k * eb - np.sqrt(k**2 * eb**2 - k**2 + R**2)
+    k_q = k * eb - np.sqrt(np.clip(k**2 * eb**2 - k**2 + R**2, 0.0, None))
     q = o + k_q[..., None] * e
     c = o + k[..., None] * b[..., None, :]
     return _dot(_unit(leds - q) + e, q - c)
@@ -91,11 +91,12 @@ def corneal_centre(camera: Camera, leds: np.ndarray, glints_px: np.ndarray, R) -
     def total(k):
         return np.sum(reflection_residuals(k, o, leds, e, b, R), axis=-1)
 
-    k_c = _bisect(total, R * (1.0 + 1e-9), grazing * (1.0 - 1e-12))
+    k_c = _bisect(total, R * (1.0 + 1e-9), grazing * (1.0 - 1e-9))
     for _ in range(_GAUSS_NEWTON_STEPS):
         h = 1e-6 * k_c
         f = reflection_residuals(k_c, o, leds, e, b, R)
-        df = (reflection_residuals(k_c + h, o, leds, e, b, R) - reflection_residuals(k_c - h, o, leds, e, b, R)) / (2 * h)
+        df = reflection_residuals(k_c + h, o, leds, e, b, R) - reflection_residuals(k_c - h, o, leds, e, b, R)
+        df = df / (2 * h[..., None])
         step = _dot(f, df) / _dot(df, df)
         k_c = k_c - np.where(np.isfinite(step), step, 0.0)
     return o + k_c[..., None] * b
