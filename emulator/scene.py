@@ -101,6 +101,16 @@ class Scene:
     source: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        leds = np.asarray(self.leds, dtype=float)
+        if leds.ndim != 2 or leds.shape[1] != 3 or len(leds) == 0:
+            raise SceneError(f"leds: expected (n, 3) positions in mm, got shape {leds.shape}")
+        if not np.all(np.isfinite(leds)) or np.any(leds[:, 2] <= 0):
+            raise SceneError("leds: every LED must be finite and in front of the eyes (z > 0 mm)")
+        if any(s not in SIDES for s in self.sides) or not self.sides:
+            raise SceneError(f"sides: expected 'right' and/or 'left', got {self.sides!r}")
+        object.__setattr__(self, "leds", leds)
+
     def apex(self, side: str) -> np.ndarray:
         """Unrotated anterior corneal apex of the `side` eye in the head frame (mm)."""
         return np.array([-self.ipd_mm / 2 if side == "right" else self.ipd_mm / 2, 0.0, 0.0])

@@ -1,0 +1,26 @@
+"""Shared fixtures: a few eyes and the scene presets."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from emulator.eye.biometry import eye_from_biometry
+from emulator.eye.model import EyeModel
+
+
+def make_eyes(n: int = 4, seed: int = 0) -> EyeModel:
+    """A small batch of plausible, varied eyes (not the Rozema population: a test fixture)."""
+    rng = np.random.default_rng(seed)
+    return eye_from_biometry(
+        anterior_radius=rng.normal(7.8, 0.25, n), anterior_conic=rng.uniform(-0.5, 0.0, n),
+        posterior_radius=rng.normal(6.5, 0.2, n), posterior_conic=rng.uniform(-0.4, 0.2, n),
+        cct=rng.normal(0.545, 0.03, n), acd=rng.normal(2.9, 0.3, n), pupil_diameter=rng.uniform(3.0, 7.0, n),
+        lens_anterior_radius=rng.normal(10.4, 1.0, n), lens_posterior_radius=rng.normal(6.9, 0.6, n),
+        lens_thickness=rng.normal(4.0, 0.4, n), axial_length=rng.normal(23.7, 1.0, n), lens_index=1.42,
+    )
+
+
+@pytest.fixture
+def eyes() -> EyeModel:
+    return make_eyes()

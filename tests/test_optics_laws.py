@@ -1,0 +1,136 @@
+"""Known answers for the optical primitives: refraction, reflection, conic intersection, camera, ellipse fit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from emulator.optics.camera import PinholeCamera
+from emulator.optics.conic import Conic
+from emulator.optics.ellipse import fit_ellipse
+from emulator.optics.rays import reflect, refract, unit
+
+RNG = np.random.default_rng(42)
+
+
+def _random_rays(n: int) -> tuple[np.ndarray, np.ndarray]:
+    normals = unit(RNG.normal(size=(n, 3)))
+    d = unit(RNG.normal(size=(n, 3)))
+    d = np.where((np.einsum("ij,ij->i", d, normals) > 0)[:, None], -d, d)  # incoming against the normal
+    return d, normals
+
+
+def test_refraction_obeys_snell_and_stays_in_the_plane_of_incidence() -> None:
+    d, n = _random_rays(10_000)
+    n1, n2 = 1.0, 1.376
+    t, ok = refract(d, n, n1, n2)
+    assert ok.all()
+    sin_i = np.linalg.norm(np.cross(d, n), axis=1)
+    sin_t = np.linalg.norm(np.cross(t, n), axis=1)
+    np.testing.assert_allclose(n1 * sin_i, n2 * sin_t, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(t, axis=1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(np.einsum("ij,ij->i", np.cross(d, n), t), 0.0, atol=1e-12)
+    assert np.all(np.einsum("ij,ij->i", t, n) < 0)  # transmitted, not reflected
+
+
+def test_refraction_known_answer_and_total_internal_reflection() -> None:
+    d = np.array([np.sin(np.radians(30)), 0.0, -np.cos(np.radians(30))])
+    t, ok = refract(d, np.array([0.0, 0.0, 1.0]), 1.0, 1.5)
+    assert ok and abs(t[0] - 1 / 3) < 1e-12
+    glancing = np.array([np.sin(np.radians(60)), 0.0, -np.cos(np.radians(60))])
+    _, ok = refract(glancing, np.array([0.0, 0.0, 1.0]), 1.5, 1.0)  # sin 60 * 1.5 > 1
+    assert not ok
+
+
+def test_reflection_law() -> None:
+    d, n = _random_rays(10_000)
+    r = reflect(d, n)
+    np.testing.assert_allclose(np.einsum("ij,ij->i", r, n), -np.einsum("ij,ij->i", d, n), atol=1e-12)
+    np.testing.assert_allclose(np.cross(r, n), np.cross(d, n), atol=1e-12)  # tangential part kept: same plane
+    np.testing.assert_allclose(np.linalg.norm(r, axis=1), 1.0, atol=1e-12)
+
+
+def test_sphere_intersection_matches_closed_form() -> None:
+    radius, apex = 7.8, 0.0
+    centre = np.array([0.0, 0.0, apex - radius])
+    sphere = Conic(apex, radius, 0.0, 1e9)
+    origins = np.column_stack([RNG.uniform(-3, 3, 2000), RNG.uniform(-3, 3, 2000), RNG.uniform(20, 50, 2000)])
+    dirs = unit(centre + RNG.uniform(-4, 4, (2000, 3)) - origins)
+    t, ok = sphere.intersect(origins, dirs)
+    oc = origins - centre
+    b = np.einsum("ij,ij->i", oc, dirs)
+    disc = b**2 - (np.einsum("ij,ij->i", oc, oc) - radius**2)
+    expected = -b - np.sqrt(disc)
+    assert ok.all()
+    np.testing.assert_allclose(t, expected, atol=1e-10)
+
+
+def test_ellipsoid_intersection_lies_on_the_surface_and_the_normal_is_the_gradient() -> None:
+    s = Conic(-0.5, 6.5, -0.3, 6.0)
+    origins = np.column_stack([RNG.uniform(-2, 2, 500), RNG.uniform(-2, 2, 500), np.full(500, 5.0)])
+    dirs = unit(np.column_stack([RNG.uniform(-0.2, 0.2, 500), RNG.uniform(-0.2, 0.2, 500), -np.ones(500)]))
+    t, ok = s.intersect(origins, dirs)
+    p = origins + t[:, None] * dirs
+    w = -0.5 - p[:, 2]
+    np.testing.assert_allclose(p[:, 0] ** 2 + p[:, 1] ** 2 + 0.7 * w**2 - 13.0 * w, 0.0, atol=1e-10)
+    n = s.normal(p)
+    grad = np.column_stack([2 * p[:, 0], 2 * p[:, 1], -(2 * 0.7 * w - 13.0)])
+    np.testing.assert_allclose(n, unit(grad), atol=1e-12)
+    assert ok.all()
+
+
+def test_ray_missing_the_cap_is_invalid_not_nan_silently() -> None:
+    s = Conic(0.0, 7.8, -0.2, 5.9)
+    t, ok = s.intersect(np.array([20.0, 0.0, 5.0]), np.array([0.0, 0.0, -1.0]))
+    assert not ok and np.isnan(t)
+
+
+def test_conic_rejects_zero_radius() -> None:
+    with pytest.raises(ValueError, match="radius"):
+        Conic(0.0, 0.0, 0.0, 5.0)
+
+
+def test_camera_known_answer_and_orientation() -> None:
+    cam = PinholeCamera.from_angles(position=np.array([0.0, 0.0, 600.0]), focal_px=(1000.0, 1000.0),
+                                    principal_px=(320.0, 240.0), resolution_px=(640, 480))
+    px, front = cam.project(np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [0.0, 10.0, 0.0]]))
+    np.testing.assert_allclose(px, [[320, 240], [320 + 1000 * 10 / 600, 240], [320, 240 - 1000 * 10 / 600]])
+    assert front.all()
+    pitch = np.degrees(np.arctan2(150.5, 615))
+    tilted = PinholeCamera.from_angles(position=np.array([0.0, -150.5, 615.0]), pitch_deg=pitch,
+                                       focal_px=(4666.67, 4666.67), principal_px=(320.0, 240.0),
+                                       resolution_px=(640, 480))
+    px, _ = tilted.project(np.zeros(3))
+    np.testing.assert_allclose(px, [320.0, 240.0], atol=1e-9)  # aimed at the origin
+
+
+def test_camera_radial_distortion_moves_points_outward() -> None:
+    kw = dict(position=np.array([0.0, 0.0, 600.0]), focal_px=(1000.0, 1000.0), principal_px=(320.0, 240.0),
+              resolution_px=(640, 480))
+    plain, barrel = PinholeCamera.from_angles(**kw), PinholeCamera.from_angles(**kw, distortion=(0.1, 0.0))
+    p = np.array([60.0, 0.0, 0.0])
+    x = 0.1
+    np.testing.assert_allclose(barrel.project(p)[0][0] - 320, 1000 * x * (1 + 0.1 * x * x))
+    assert barrel.project(p)[0][0] > plain.project(p)[0][0]
+
+
+@pytest.mark.parametrize("angle", [0.0, 17.0, 90.0, 135.0])
+def test_ellipse_fit_recovers_an_exact_ellipse(angle: float) -> None:
+    th = np.linspace(0, 2 * np.pi, 30, endpoint=False)
+    a, b, t = 25.0, 14.0, np.radians(angle)
+    pts = np.column_stack([300 + a * np.cos(th) * np.cos(t) - b * np.sin(th) * np.sin(t),
+                           200 + a * np.cos(th) * np.sin(t) + b * np.sin(th) * np.cos(t)])
+    weights = np.ones(30)
+    weights[[3, 4, 5, 20]] = 0  # dropped points
+    pts[[3, 4, 5, 20]] = np.nan
+    e = fit_ellipse(pts[None], weights[None])
+    assert e.valid[0]
+    np.testing.assert_allclose(e.centre[0], [300, 200], atol=1e-9)
+    np.testing.assert_allclose(e.axes[0], [2 * a, 2 * b], atol=1e-9)
+    assert abs((e.angle_deg[0] - angle + 90) % 180 - 90) < 1e-7
+
+
+def test_ellipse_fit_with_too_few_points_is_invalid() -> None:
+    pts = np.array([[[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0], [2.0, 2.0]]])
+    e = fit_ellipse(pts, np.array([[1, 1, 1, 1, 0]]))
+    assert not e.valid[0]

@@ -1,0 +1,112 @@
+"""Known answers for the glint and apparent-pupil solvers and the line of sight."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from emulator.eye.media import Media
+from emulator.eye.surfaces import cornea_optics
+from emulator.fixation import line_of_sight
+from emulator.optics.conic import Conic
+from emulator.optics.glint import solve_glints
+from emulator.optics.pupil import pupil_boundary, solve_exit_points
+from emulator.optics.rays import unit
+
+RNG = np.random.default_rng(7)
+
+
+def test_glint_of_a_sphere_matches_the_symmetric_closed_form() -> None:
+    """LED and camera at equal distance from the centre: the glint lies on the bisector, G = C + R unit(l + o)."""
+    radius, n = 7.8, 500
+    centre = np.array([0.0, 0.0, -radius])
+    sphere = Conic(0.0, radius, 0.0, 7.0)
+    axis = unit(np.column_stack([RNG.uniform(-0.3, 0.3, n), RNG.uniform(-0.3, 0.3, n), np.ones(n)]))
+    side = unit(np.cross(axis, RNG.normal(size=(n, 3))))
+    half = np.radians(RNG.uniform(2, 20, n))[:, None]
+    dist = RNG.uniform(400, 800, n)[:, None]
+    led = centre + dist * (np.cos(half) * axis + np.sin(half) * side)
+    cam = centre + dist * (np.cos(half) * axis - np.sin(half) * side)
+    g = solve_glints(sphere, led, cam)
+    assert g.valid.all()
+    np.testing.assert_allclose(g.point, centre + radius * axis, atol=1e-9)
+    assert np.max(g.residual_mm) < 1e-9
+
+
+def test_glint_of_an_ellipsoid_obeys_the_law_of_reflection() -> None:
+    cornea = Conic(0.0, 7.6, -0.35, 5.9)
+    led = np.column_stack([RNG.uniform(-200, 200, 300), RNG.uniform(-100, 100, 300), np.full(300, 650.0)])
+    cam = np.array([0.0, -150.0, 615.0])
+    g = solve_glints(cornea, led, cam)
+    assert g.valid.all() and np.max(g.residual_mm) < 1e-4
+    n = cornea.normal(g.point)
+    bisector = unit(unit(led - g.point) + unit(cam - g.point))
+    np.testing.assert_allclose(n, bisector, atol=1e-9)
+
+
+def test_glint_off_the_cornea_is_invalid() -> None:
+    cornea = Conic(0.0, 7.8, -0.2, 5.9)
+    # LED and camera far to the side: the reflecting normal would point along +x, beyond the limbus
+    g = solve_glints(cornea, np.array([600.0, 0.0, -5.0]), np.array([600.0, 40.0, -5.0]))
+    assert not g.valid
+
+
+def _single_surface_optics(stop_depth: float = 3.6):
+    """One refracting surface (R 7.8, n 1.3375): the posterior cornea separates equal indices."""
+    from emulator.optics.conic import Plane
+    from emulator.optics.pupil import CorneaOptics
+
+    n = 1.3375
+    return CorneaOptics(Conic(0.0, 7.8, 0.0, 6.0), Conic(-0.5, 7.3, 0.0, 6.0), Plane(np.asarray(-stop_depth)),
+                        np.asarray(1.0), np.asarray(n), np.asarray(n))
+
+
+def test_entrance_pupil_of_a_single_surface_matches_paraxial_optics() -> None:
+    """Paraxial: image of the stop at v with 1/v = (1 - n)/(-R) + n/(-d): v = -3.046 mm, m = n v / (-d) = 1.132."""
+    n, radius, depth = 1.3375, 7.8, 3.6
+    v = 1.0 / ((1.0 - n) / (-radius) + n / (-depth))
+    m = n * v / (-depth)
+    optics = _single_surface_optics(depth)
+    point = np.array([0.1, 0.0, -depth])  # near the axis
+    cams = np.array([[0.0, 0.0, 600.0], [8.0, 0.0, 600.0]])  # parallax between two viewpoints
+    exits = solve_exit_points(optics, cams, np.broadcast_to(point, (2, 3)))
+    assert exits.valid.all()
+    d = unit(exits.point - cams)
+    # closest approach of the two exit rays (extended back into the eye): the virtual image of the point
+    w0 = cams[0] - cams[1]
+    a, b, c = d[0] @ d[0], d[0] @ d[1], d[1] @ d[1]
+    s = (b * (d[1] @ w0) - c * (d[0] @ w0)) / (a * c - b * b)
+    image = cams[0] + s * d[0]
+    assert abs(image[2] - v) / abs(v) < 0.01
+    assert abs(image[0] / point[0] - m) / m < 0.01
+    assert abs(m - 1.132) < 1e-3 and abs(v + 3.046) < 1e-3
+
+
+def test_apparent_pupil_points_trace_back_to_the_pupil(eyes) -> None:
+    media = Media.cauchy(850)
+    optics = cornea_optics(eyes, media, 1)
+    from emulator.eye.surfaces import pupil_centre
+    from emulator.optics.pupil import trace_into_eye
+
+    boundary = pupil_boundary(pupil_centre(eyes)[..., :2], eyes.pupil_radius, -eyes.stop_depth, 30)
+    cam = np.array([5.0, -150.0, 600.0])
+    exits = solve_exit_points(optics, cam, boundary)
+    assert exits.valid.all() and exits.residual_mm.max() < 1e-6
+    back, ok = trace_into_eye(optics, exits.point[..., :2], source=cam)
+    assert ok.all()
+    np.testing.assert_allclose(back, boundary, atol=1e-6)
+
+
+def test_line_of_sight_makes_the_fovea_angle_and_crosses_the_stop_centre(eyes) -> None:
+    los = line_of_sight(eyes, Media.cauchy(850))
+    assert los.valid.all()
+    h = np.degrees(np.arctan2(los.direction[:, 0], los.direction[:, 2]))
+    v = np.degrees(np.arcsin(los.direction[:, 1]))
+    np.testing.assert_allclose(h, eyes.alpha_h, atol=1e-9)
+    np.testing.assert_allclose(v, eyes.alpha_v, atol=1e-9)
+    left = line_of_sight(eyes.mirrored(), Media.cauchy(850))
+    np.testing.assert_allclose(left.direction * [-1, 1, 1], los.direction, atol=1e-12)
+    np.testing.assert_allclose(left.fovea * [-1, 1, 1], los.fovea, atol=1e-9)
+    # the fovea lies temporal (x < 0 for a right eye), inferior, and within 0.3 mm of the depth of the
+    # posterior pole (it sits 1-2 mm off the axis on a retina of radius ~11 mm: r^2 / 2R ~ 0.1-0.2 mm)
+    assert np.all(los.fovea[:, 0] < 0) and np.all(los.fovea[:, 1] < 0)
+    assert np.all(los.fovea[:, 2] > -eyes.axial_length) and np.all(los.fovea[:, 2] < -eyes.axial_length + 0.3)
