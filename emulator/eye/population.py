@@ -131,6 +131,7 @@ def sample(
 
 def rejection_codes(raw: RawDraws, lens_index: str | float = "thick-lens") -> np.ndarray:
     """Per draw: 0 if it is a valid eye, else 1 + the index in `REJECTION_REASONS` of its first failing reason."""
+    _check_lens_index(lens_index)
     lengths = ("R_lens_ant", "lens_thickness", "CCT", "ACD", "axial_length", "pupil_diameter_scotopic", "K_ant_M")
     non_positive = np.any([raw[k] <= 0 for k in lengths], axis=0) | (raw["K_post_M"] >= 0) | (raw["R_lens_post"] >= 0)
     vitreous = raw["axial_length"] - raw["CCT"] - raw["ACD"] - raw["lens_thickness"]

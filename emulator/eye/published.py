@@ -9,7 +9,7 @@ Lens index. The file has no lens power, so the thick-lens index of `population.p
 - `"thick-lens"`: an estimate. Each eye's lens power is its conditional mean under the Rozema 2011 normal given
   nine of its parameters (K_ant_M = 337.2 / R_ac, K_post_M = -40.8 / R_pc, R_la, -|R_lp|, T, CCT, ACD, AL, pupil;
   the eccentricities are left out because Q = -e^2 has lost their sign); the thick-lens equation then gives n_L.
-  The conditional SD of the lens power is 1.47 D (0.007 in n_L), so it is not the study's value, only a
+  The conditional SD of the lens power is 1.47 D (about 0.006 in n_L), so it is not the study's value, only a
   principled guess; the estimate is also less dispersed than real indices.
 - a float: that fixed index.
 
