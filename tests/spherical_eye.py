@@ -74,8 +74,8 @@ def _plane_basis(c: np.ndarray, toward: np.ndarray, other: np.ndarray):
     rel = other - c
     b = rel - np.sum(rel * a, -1, keepdims=True) * a
     nb = np.linalg.norm(b, axis=-1, keepdims=True)
-    fallback = np.cross(a, [0.0, 1.0, 0.0])
-    b = np.where(nb > 1e-12, b / np.where(nb > 1e-12, nb, 1.0), fallback / np.linalg.norm(fallback, axis=-1, keepdims=True))
+    fallback = _unit(np.cross(a, [0.0, 1.0, 0.0]))
+    b = np.where(nb > 1e-12, b / np.where(nb > 1e-12, nb, 1.0), fallback)
     return a, b, np.arctan2(np.sum(rel * b, -1), np.sum(rel * a, -1))
 
 

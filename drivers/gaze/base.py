@@ -47,7 +47,7 @@ class EyeSamples:
         if pupil.ndim < 1 or pupil.shape[-1] != 2:
             raise ValueError(f"pupil_px must have shape (..., 2), got {pupil.shape}")
         if glints.shape[:-2] != pupil.shape[:-1] or glints.shape[-1:] != (2,) or glints.ndim < 2:
-            raise ValueError(f"glints_px must have shape {pupil.shape[:-1] + ('n_leds', 2)}, got {glints.shape}")
+            raise ValueError(f"glints_px must have shape {(*pupil.shape[:-1], 'n_leds', 2)}, got {glints.shape}")
         valid = np.ones(pupil.shape[:-1], bool) if self.valid is None else np.asarray(self.valid)
         if valid.shape != pupil.shape[:-1] or valid.dtype != bool:
             raise ValueError(f"valid must be a bool array of shape {pupil.shape[:-1]}, got {valid.dtype} {valid.shape}")

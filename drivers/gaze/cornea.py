@@ -66,7 +66,9 @@ def common_direction(o: np.ndarray, leds: np.ndarray, e: np.ndarray) -> np.ndarr
     return b * np.sign(_dot(b, e.mean(axis=-2)))[..., None]
 
 
-def reflection_residuals(k_c: np.ndarray, o: np.ndarray, leds: np.ndarray, e: np.ndarray, b: np.ndarray, R) -> np.ndarray:
+def reflection_residuals(
+    k_c: np.ndarray, o: np.ndarray, leds: np.ndarray, e: np.ndarray, b: np.ndarray, R
+) -> np.ndarray:
     """f_i(k_c) (..., n) mm of thesis 3.8 for c = o + k_c b^ (beyond grazing, q is the tangent point)."""
     k = np.asarray(k_c)[..., None]
     eb = _dot(e, b[..., None, :])

@@ -76,7 +76,7 @@ class Camera:
         target: np.ndarray,
         K: np.ndarray,
         image_size: tuple[int, int],
-        image_x: np.ndarray = (1.0, 0.0, 0.0),
+        image_x: np.ndarray | tuple[float, float, float] = (1.0, 0.0, 0.0),
     ) -> Camera:
         """A camera at `o` (world, mm) whose optical axis points at `target` (world, mm).
 
@@ -94,7 +94,7 @@ class Camera:
         d = R^T K^-1 (u, v, 1)^T, normalised; it points into the scene (camera z > 0).
         """
         px = np.asarray(pixels, float)
-        homog = np.concatenate([px, np.ones(px.shape[:-1] + (1,))], axis=-1)
+        homog = np.concatenate([px, np.ones((*px.shape[:-1], 1))], axis=-1)
         d_cam = np.linalg.solve(self.K, homog[..., None])[..., 0]
         return _unit(d_cam @ self.R)
 

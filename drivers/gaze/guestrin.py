@@ -84,13 +84,16 @@ def reconstruct(
     if samples.n_leds != geometry.n_leds:
         raise ValueError(f"samples carry {samples.n_leds} glints, the geometry has {geometry.n_leds} LEDs")
     camera = geometry.camera
+    centre_px = camera.K[:2, 2]  # a finite stand-in for invalid samples (masked below; SVD rejects NaN)
+    glints = np.where(samples.valid[..., None, None], samples.glints_px, centre_px)
+    pupil = np.where(samples.valid[..., None], samples.pupil_px, centre_px)
     if geometry.n_leds == 1:
         if eye_distance_mm is None:
             raise ValueError("one LED: eye_distance_mm (camera nodal point to corneal centre) is required")
-        c = corneal_centre_one_led(camera, geometry.leds[0], samples.glints_px[..., 0, :], params.R, eye_distance_mm)
+        c = corneal_centre_one_led(camera, geometry.leds[0], glints[..., 0, :], params.R, eye_distance_mm)
     else:
-        c = corneal_centre(camera, geometry.leds, samples.glints_px, params.R)
-    p = pupil_centre(camera, samples.pupil_px, c, params.R, params.K, params.n1)
+        c = corneal_centre(camera, geometry.leds, glints, params.R)
+    p = pupil_centre(camera, pupil, c, params.R, params.K, params.n1)
     w = (p - c) / np.linalg.norm(p - c, axis=-1, keepdims=True)
     nu = visual_axis(w, params.alpha_deg, params.beta_deg)
     invalid = ~samples.valid[..., None]
@@ -187,8 +190,8 @@ class GuestrinEstimator:
         distance = self.eye_distance_mm
         if distance is not None and np.ndim(distance):
             distance = np.broadcast_to(distance, samples.shape)[keep]
-        fit = replace(self, eye_distance_mm=distance)
-        return fit._solve(used, targets[keep])
+        result = replace(self, eye_distance_mm=distance)._solve(used, targets[keep])
+        return replace(result, eye_distance_mm=self.eye_distance_mm) if result else result
 
     def _solve(self, used: EyeSamples, targets: np.ndarray) -> GuestrinCalibration | CalibrationFailure:
         n_targets, names = used.shape[0], self.names
