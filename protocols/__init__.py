@@ -1,0 +1,111 @@
+"""Pure codecs of the links a host uses to talk to the (virtual) eye tracker: no I/O, no threads.
+
+- `cobs`, `crc`, `framing`: COBS frames delimited by 0x00 and an incremental, never-raising decoder;
+- `header`, `messages`, `replies`, `samples`, `native`: the eyehil native protocol (docs/protocol.md);
+- `stream`: bytes in, decoded messages, faults, counters and sequence gaps out;
+- `batch`: vectorised FEATURES encoding/decoding with numpy; `images`: FRAME_CHUNK split/reassembly;
+- `iscan`: the ISCAN-compatible legacy mode;
+- `errors`: the exception tree (drawn in its docstring) and the ERROR codes.
+"""
+
+from protocols.enums import (
+    Capability,
+    DeviceState,
+    Eye,
+    EyeSelect,
+    GlintFlags,
+    PixelFormat,
+    PupilFlags,
+    StimulusFlags,
+    StreamSelect,
+)
+from protocols.errors import (
+    BadLengthError,
+    BadMagicError,
+    CobsDecodeError,
+    CrcError,
+    ErrorCode,
+    FramingError,
+    MalformedPayloadError,
+    ProtocolError,
+    UnknownMessageTypeError,
+    UnsupportedVersionError,
+)
+from protocols.framing import FrameDecoder, FramingFault, encode_frame
+from protocols.header import PROTOCOL_VERSION, Header, MessageType, seq_gap
+from protocols.messages import Configure, GetInfo, GetStatus, Ping, Start, Stimulus, Stop
+from protocols.native import (
+    DEVICE_TYPES,
+    HOST_TYPES,
+    MESSAGE_CLASSES,
+    Message,
+    check_configure,
+    decode,
+    decode_wire,
+    default_configure,
+    encode,
+    encode_raw,
+    error_reply_for,
+)
+from protocols.replies import Ack, DeviceInfo, ErrorReply, Pong, Status
+from protocols.samples import EyeFeatures, Features, FrameChunk, Glint
+from protocols.stream import NativeReceiver, Received, Rejected
+
+__all__ = [
+    "DEVICE_TYPES",
+    "HOST_TYPES",
+    "MESSAGE_CLASSES",
+    "PROTOCOL_VERSION",
+    "Ack",
+    "BadLengthError",
+    "BadMagicError",
+    "Capability",
+    "CobsDecodeError",
+    "Configure",
+    "CrcError",
+    "DeviceInfo",
+    "DeviceState",
+    "ErrorCode",
+    "ErrorReply",
+    "Eye",
+    "EyeFeatures",
+    "EyeSelect",
+    "Features",
+    "FrameChunk",
+    "FrameDecoder",
+    "FramingError",
+    "FramingFault",
+    "GetInfo",
+    "GetStatus",
+    "Glint",
+    "GlintFlags",
+    "Header",
+    "MalformedPayloadError",
+    "Message",
+    "MessageType",
+    "NativeReceiver",
+    "Ping",
+    "PixelFormat",
+    "Pong",
+    "ProtocolError",
+    "PupilFlags",
+    "Received",
+    "Rejected",
+    "Start",
+    "Status",
+    "Stimulus",
+    "StimulusFlags",
+    "Stop",
+    "StreamSelect",
+    "UnknownMessageTypeError",
+    "UnsupportedVersionError",
+    "check_configure",
+    "decode",
+    "decode_wire",
+    "default_configure",
+    "encode",
+    "encode_frame",
+    "encode_raw",
+    "error_reply_for",
+    "seq_gap",
+]

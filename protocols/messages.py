@@ -3,7 +3,8 @@
 Every message class has ``TYPE`` (its `MessageType`), ``to_payload() -> bytes`` and
 ``from_payload(bytes)`` (raises `MalformedPayloadError`). Fixed-layout messages are one little-endian
 struct of their fields in declaration order (`Fixed`); the struct format is given next to each class.
-Replies are in `protocols.replies`, streamed samples (FEATURES, FRAME_CHUNK) in `protocols.samples`. See docs/protocol.md.
+Replies are in `protocols.replies`, streamed samples (FEATURES, FRAME_CHUNK) in `protocols.samples`.
+Wire layouts: docs/protocol.md.
 """
 
 from __future__ import annotations

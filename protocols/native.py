@@ -11,6 +11,7 @@ device implementation refuses the same things with the same codes. Specification
 
 from __future__ import annotations
 
+from protocols import cobs
 from protocols.enums import Capability, EyeSelect, StreamSelect
 from protocols.errors import ErrorCode, MalformedPayloadError, ProtocolError, UnknownMessageTypeError
 from protocols.framing import encode_frame
@@ -62,11 +63,9 @@ def decode(
         raise MalformedPayloadError(f"{cls.TYPE.name}: {exc}", header.seq, header.msg_type) from exc
 
 
-def decode_wire(wire: bytes, **kwargs: object) -> tuple[Header, Message]:
-    """Decode exactly one COBS frame with or without its trailing delimiter (tests, tools)."""
-    from protocols import cobs
-
-    return decode(cobs.decode(wire.removesuffix(b"\x00")), **kwargs)  # type: ignore[arg-type]
+def decode_wire(wire: bytes, accept: frozenset[MessageType] | None = None) -> tuple[Header, Message]:
+    """Decode exactly one COBS frame, with or without its trailing delimiter (tests, tools)."""
+    return decode(cobs.decode(wire.removesuffix(b"\x00")), accept)
 
 
 HOST_TYPES = frozenset(t for t in MessageType if t.from_host)
@@ -97,7 +96,7 @@ def check_configure(cfg: Configure, info: DeviceInfo) -> tuple[ErrorCode, str] |
     caps = info.capabilities
     checks = (
         (cfg.leds not in (1, 2) or cfg.leds > info.led_count, ErrorCode.INVALID_ARGUMENT, "LED count"),
-        (not info.min_rate_hz <= cfg.rate_hz <= info.max_rate_hz, ErrorCode.INVALID_ARGUMENT, "rate"),
+        (not _rate_ok(cfg.rate_hz, info), ErrorCode.INVALID_ARGUMENT, "rate"),
         (cfg.eyes not in (EyeSelect.RIGHT, EyeSelect.LEFT, EyeSelect.BOTH), ErrorCode.INVALID_ARGUMENT, "eyes"),
         (cfg.stream not in (StreamSelect.FEATURES, StreamSelect.FRAMES, StreamSelect.BOTH),
          ErrorCode.INVALID_ARGUMENT, "stream"),
@@ -111,6 +110,11 @@ def check_configure(cfg: Configure, info: DeviceInfo) -> tuple[ErrorCode, str] |
         if failed:
             return code, f"CONFIGURE: {what} not accepted"
     return None
+
+
+def _rate_ok(rate_hz: int, info: DeviceInfo) -> bool:
+    """True if the rate is inside both the protocol's and the device's range."""
+    return max(MIN_RATE_HZ, info.min_rate_hz) <= rate_hz <= min(MAX_RATE_HZ, info.max_rate_hz)
 
 
 def _roi_set(cfg: Configure) -> bool:

@@ -1,0 +1,102 @@
+"""Camera images as FRAME_CHUNK messages: split on the device side, reassemble on the host side.
+
+Pure helpers around `protocols.samples.FrameChunk`. The device sends the chunks of one image in order,
+and may abandon an image (link too slow, STOP): the host's `ImageAssembler` then drops the partial
+image when a chunk of a newer frame id arrives and counts it in ``incomplete``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from protocols.enums import Eye, PixelFormat
+from protocols.header import MAX_PAYLOAD
+from protocols.samples import FrameChunk
+
+MAX_CHUNK_DATA = MAX_PAYLOAD - FrameChunk.STRUCT.size  # 4074 pixel bytes per chunk
+_FORMATS = {np.dtype(np.uint8): PixelFormat.MONO8, np.dtype("<u2"): PixelFormat.MONO16}
+
+
+def split_image(
+    frame_id: int, eye: Eye, image: np.ndarray, roi_xy: tuple[int, int] = (0, 0), chunk_data: int = MAX_CHUNK_DATA
+) -> list[FrameChunk]:
+    """FRAME_CHUNKs of a 2-D uint8 or uint16 `image` whose top-left pixel is at `roi_xy` on the sensor."""
+    if image.ndim != 2 or np.dtype(image.dtype).newbyteorder("<") not in _FORMATS:
+        raise ValueError(f"expected a 2-D uint8 or uint16 image, got {image.dtype} {image.shape}")
+    if not 0 < chunk_data <= MAX_CHUNK_DATA:
+        raise ValueError(f"chunk_data must be in 1..{MAX_CHUNK_DATA}")
+    fmt = _FORMATS[np.dtype(image.dtype).newbyteorder("<")]
+    raw = np.ascontiguousarray(image, dtype=image.dtype.newbyteorder("<")).tobytes()
+    count = max(1, -(-len(raw) // chunk_data))
+    height, width = image.shape
+    return [
+        FrameChunk(
+            frame_id, eye, fmt, width, height, *roi_xy, k, count, k * chunk_data, raw[k * chunk_data :][:chunk_data]
+        )
+        for k in range(count)
+    ]
+
+
+@dataclass(frozen=True)
+class Image:
+    """A reassembled camera image with its frame id, eye and sensor position (px)."""
+
+    frame_id: int
+    eye: Eye
+    roi_x: int
+    roi_y: int
+    pixels: np.ndarray  # [height, width] uint8 or uint16
+
+
+@dataclass
+class _Partial:
+    """An image being reassembled: its first chunk's geometry, the buffer and the chunks seen."""
+
+    first: FrameChunk
+    buffer: bytearray
+    seen: set[int] = field(default_factory=set)
+
+
+class ImageAssembler:
+    """Collects FRAME_CHUNKs (one image in progress per eye) and returns each complete image once."""
+
+    def __init__(self) -> None:
+        """Start with nothing in progress; counters ``complete``, ``incomplete``, ``inconsistent``."""
+        self._partial: dict[Eye, _Partial] = {}
+        self.complete = 0
+        self.incomplete = 0
+        self.inconsistent = 0
+
+    def add(self, chunk: FrameChunk) -> Image | None:
+        """Take one chunk; return the image it completes, else None."""
+        part = self._partial.get(chunk.eye)
+        if part is not None and part.first.frame_id != chunk.frame_id:
+            self.incomplete += 1
+            part = None
+        if part is None:
+            part = _Partial(chunk, bytearray(chunk.image_size))
+            self._partial[chunk.eye] = part
+        if not _same_geometry(part.first, chunk):
+            self.inconsistent += 1
+            del self._partial[chunk.eye]
+            return None
+        part.buffer[chunk.offset : chunk.offset + len(chunk.data)] = chunk.data
+        part.seen.add(chunk.chunk_index)
+        return self._finish(chunk.eye) if len(part.seen) == chunk.chunk_count else None
+
+    def _finish(self, eye: Eye) -> Image:
+        """Pop the completed image of `eye` and wrap it as an `Image`."""
+        part = self._partial.pop(eye)
+        c = part.first
+        dtype = np.uint8 if c.pixel_format is PixelFormat.MONO8 else np.dtype("<u2")
+        pixels = np.frombuffer(bytes(part.buffer), dtype).reshape(c.height, c.width)
+        self.complete += 1
+        return Image(c.frame_id, c.eye, c.roi_x, c.roi_y, pixels)
+
+
+def _same_geometry(a: FrameChunk, b: FrameChunk) -> bool:
+    """True if two chunks describe the same image layout."""
+    keys = ("pixel_format", "width", "height", "roi_x", "roi_y", "chunk_count")
+    return all(getattr(a, k) == getattr(b, k) for k in keys)

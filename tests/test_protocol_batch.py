@@ -1,0 +1,105 @@
+"""Vectorised FEATURES codec against the per-message codec, and camera images as FRAME_CHUNKs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from protocols import CrcError, Eye, FrameChunk, MalformedPayloadError, cobs, decode_wire, encode
+from protocols.batch import FeaturesBatch, decode_features_batch, encode_features_batch, features_dtype
+from protocols.errors import BadLengthError
+from protocols.images import MAX_CHUNK_DATA, ImageAssembler, split_image
+from protocols.samples import EyeFeatures, Features, Glint
+
+
+def _batch(rng: np.random.Generator, n: int, n_eyes: int, n_glints: int) -> FeaturesBatch:
+    f32 = lambda *shape: rng.normal(300, 80, shape).astype(np.float32)  # noqa: E731
+    u8 = lambda *shape: rng.integers(0, 256, shape, dtype=np.uint8)  # noqa: E731
+    return FeaturesBatch(
+        frame_id=rng.integers(0, 2**32, n, dtype=np.uint32), eye=np.arange(n_eyes, dtype=np.uint8),
+        flags=u8(n, n_eyes), centre=f32(n, n_eyes, 2), axes=f32(n, n_eyes, 2), angle_deg=f32(n, n_eyes),
+        confidence=rng.random((n, n_eyes), dtype=np.float32), glint_led=u8(n, n_eyes, n_glints),
+        glint_xy=f32(n, n_eyes, n_glints, 2), glint_flags=u8(n, n_eyes, n_glints),
+    )  # fmt: skip
+
+
+def _message(b: FeaturesBatch, i: int) -> Features:
+    """Sample `i` of a batch as a `Features` message, built field by field."""
+    eyes = []
+    for e, eye_id in enumerate(b.eye):
+        glints = tuple(
+            Glint(int(b.glint_led[i, e, g]), float(b.glint_xy[i, e, g, 0]), float(b.glint_xy[i, e, g, 1]),
+                  int(b.glint_flags[i, e, g]))
+            for g in range(b.glint_led.shape[-1])
+        )  # fmt: skip
+        pupil = [*b.centre[i, e], *b.axes[i, e], b.angle_deg[i, e], b.confidence[i, e]]
+        eyes.append(EyeFeatures(int(eye_id), int(b.flags[i, e]), *map(float, pupil), glints))
+    return Features(int(b.frame_id[i]), tuple(eyes))
+
+
+def test_dtype_sizes_match_the_specification() -> None:
+    assert features_dtype(1, 2).itemsize == 72
+    assert features_dtype(2, 2).itemsize == 119
+    assert features_dtype(1, 0).itemsize == 52
+
+
+@pytest.mark.parametrize(("n_eyes", "n_glints"), [(1, 2), (2, 2), (2, 0), (1, 5)])
+def test_batch_encoding_equals_message_encoding(n_eyes: int, n_glints: int) -> None:
+    rng = np.random.default_rng(9)
+    batch = _batch(rng, 50, n_eyes, n_glints)
+    stamps = rng.integers(0, 2**62, 50, dtype=np.uint64)
+    wires = encode_features_batch(batch, 2**32 - 3, stamps)
+    for i, wire in enumerate(wires):
+        assert wire == encode(_message(batch, i), (2**32 - 3 + i) % 2**32, int(stamps[i]))
+        assert decode_wire(wire)[1] == _message(batch, i)
+
+
+def test_batch_decoding_inverts_encoding() -> None:
+    rng = np.random.default_rng(10)
+    batch = _batch(rng, 20, 2, 2)
+    raws = [cobs.decode(w[:-1]) for w in encode_features_batch(batch, 0, np.zeros(20, np.uint64))]
+    back = decode_features_batch(raws, 2, 2)
+    for name in FeaturesBatch.__dataclass_fields__:
+        assert np.array_equal(getattr(back, name), getattr(batch, name)), name
+
+
+def test_batch_decoding_refuses_other_frames() -> None:
+    rng = np.random.default_rng(11)
+    raws = [cobs.decode(w[:-1]) for w in encode_features_batch(_batch(rng, 3, 1, 2), 0, np.zeros(3, np.uint64))]
+    with pytest.raises(BadLengthError):
+        decode_features_batch(raws, 2, 2)
+    corrupted = [raws[0], raws[1][:30] + bytes([raws[1][30] ^ 1]) + raws[1][31:], raws[2]]
+    with pytest.raises(CrcError):
+        decode_features_batch(corrupted, 1, 2)
+    swapped = _batch(rng, 1, 2, 2)
+    swapped = FeaturesBatch(**{**swapped.__dict__, "eye": np.array([1, 0], np.uint8)})
+    mixed = [cobs.decode(w[:-1]) for b in (_batch(rng, 1, 2, 2), swapped) for w in encode_features_batch(b, 0, [0])]
+    with pytest.raises(MalformedPayloadError):
+        decode_features_batch(mixed, 2, 2)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.dtype("<u2"), np.dtype(">u2")])
+def test_split_and_reassemble_an_image(dtype: np.dtype) -> None:
+    rng = np.random.default_rng(12)
+    image = rng.integers(0, 256 if dtype == np.uint8 else 4096, (480, 640)).astype(dtype)
+    chunks = split_image(42, Eye.BOTH, image, (16, 8))
+    assert all(len(c.data) <= MAX_CHUNK_DATA for c in chunks)
+    assembler = ImageAssembler()
+    results = [assembler.add(decode_wire(encode(c, i, 0))[1]) for i, c in enumerate(chunks)]
+    assert results[:-1] == [None] * (len(chunks) - 1)
+    done = results[-1]
+    assert np.array_equal(done.pixels, image) and (done.frame_id, done.roi_x, done.roi_y) == (42, 16, 8)
+
+
+def test_assembler_drops_an_incomplete_image_when_the_next_starts() -> None:
+    image = np.arange(100, dtype=np.uint8).reshape(10, 10)
+    first, second = split_image(1, Eye.RIGHT, image, chunk_data=30), split_image(2, Eye.RIGHT, image, chunk_data=30)
+    assembler = ImageAssembler()
+    for chunk in first[:2] + second:
+        done = assembler.add(chunk)
+    assert done.frame_id == 2 and assembler.incomplete == 1 and assembler.complete == 1
+
+
+def test_frame_chunk_must_lie_inside_its_image() -> None:
+    with pytest.raises(ValueError):
+        FrameChunk(1, Eye.LEFT, 1, 2, 2, 0, 0, 0, 1, 2, b"abc")
