@@ -12,6 +12,7 @@ import sys
 
 COMMANDS: dict[str, str] = {
     "simulate": "emulator.cli_simulate:register",
+    "study": "analysis.cli_study:register",
 }
 
 
