@@ -1,23 +1,32 @@
-"""Run every benchmark: `python -m bench` (add `--quick` for one repeat). Prints one line per benchmark."""
+"""Run the benchmarks: `python -m bench` (all), `python -m bench forward study` (some), `--quick` (one repeat).
+
+Each benchmark module has `run(repeats) -> dict` and `report(results) -> str` and prints one line.
+"""
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import platform
 
-from bench import forward
+BENCHMARKS = ["forward", "study"]
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(prog="python -m bench", description=__doc__)
+    parser.add_argument("names", nargs="*", help=f"benchmarks to run (default all: {', '.join(BENCHMARKS)})")
     parser.add_argument("--quick", action="store_true", help="one repeat instead of three")
     args = parser.parse_args()
+    unknown = set(args.names) - set(BENCHMARKS)
+    if unknown:
+        parser.error(f"unknown benchmark(s) {', '.join(sorted(unknown))}; known: {', '.join(BENCHMARKS)}")
     repeats = 1 if args.quick else 3
     print(f"# {platform.python_implementation()} {platform.python_version()}, {os.cpu_count()} CPUs, "
           f"{platform.machine()}; best of {repeats}")
-    results = forward.run(repeats)
-    print(forward.report(results))
+    for name in args.names or BENCHMARKS:
+        module = importlib.import_module(f"bench.{name}")
+        print(module.report(module.run(repeats)), flush=True)
     return 0
 
 
