@@ -19,7 +19,7 @@ from emulator.eye.population import parameter_table
 from emulator.eye.published import HYPERBOLOID_CLIP, conditional_lens_power, published_biometry, published_eyes
 from emulator.eye.rozema import rozema2011
 
-SHARED_EYES = Path("/work/shared/data/fischer2023_eyes.csv")
+SHARED_EYES = Path(__file__).resolve().parents[2] / "shared" / "data" / "fischer2023_eyes.csv"
 #: Table 4 of Fischer et al. 2023: mean, SD, and half the last digit shown (n_lens left out: see below).
 TABLE4 = {
     "R_ant_cornea_mm": (7.79, 0.24, 0.005), "Q_ant_cornea": (-0.21, 0.16, 0.005),

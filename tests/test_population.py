@@ -27,7 +27,7 @@ from emulator.eye.population import (
 )
 from emulator.eye.rozema import RawDraws, rozema2011, thick_lens_index
 
-SHARED = Path("/work/shared/data")
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 N_LARGE = 200_000
 
 
