@@ -1,0 +1,161 @@
+"""The Pupil Core Network API (ZeroMQ), as pure codecs: no sockets, no threads.
+
+Wire format (pupil-labs/pupil `zmq_tools.py`): a message is the multipart
+``[topic (UTF-8), msgpack(payload, use_bin_type=True), *raw_frames]``; the payload holds `topic`, every
+map key is a string (receivers unpack with ``strict_map_key=True``), and a payload key
+``__raw_data__`` (a list of buffers) is removed before packing and sent as the extra frames. Payloads
+are serialised before the first frame is sent, so a payload that cannot be packed leaves no dangling
+frame.
+
+Pupil Remote (REQ/REP) requests, checked in this order: any multipart message (forwarded to the
+backbone, reply ``Message forwarded.``), ``SUB_PORT``, ``PUB_PORT``, ``R [name]``, ``r``, ``C``,
+``c``, ``T <float>``, ``t``, ``v``, anything else (``Unknown command.``).
+
+Datums (image pixels with the origin at the top-left; Pupil's eye ids: 0 right, 1 left):
+``pupil.<id>.2d`` {topic, id, method "2d c++", norm_pos (x / w, 1 - y / h), diameter (px, the major
+axis), confidence, timestamp (s, device clock), ellipse {center, axes (full lengths), angle (deg)},
+glints (our extra key)}; ``glint.<id>``; ``frame.eye.<id>`` {topic, width, height, index, timestamp,
+format} + one raw frame; notifications ``notify.<subject>`` {subject, topic, ...}; gaze
+``gaze.2d.<eyes>.`` (note the trailing dot) {topic, norm_pos (on the screen), confidence, timestamp,
+base_data}.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import msgpack
+
+#: Limits on what a receiver accepts from the network (bytes, nesting depth).
+MAX_PAYLOAD_BYTES = 16 * 1024 * 1024
+MAX_DEPTH = 32
+VERSION = "3.6.0"
+
+RAW = "__raw_data__"
+
+
+class PupilMessageError(ValueError):
+    """A message that cannot be packed or unpacked (the reason is the message)."""
+
+
+def _check_keys(value: Any, depth: int = 0) -> None:
+    if depth > MAX_DEPTH:
+        raise PupilMessageError(f"payload nested deeper than {MAX_DEPTH} levels")
+    if isinstance(value, Mapping):
+        for key, item in value.items():
+            if not isinstance(key, str):
+                raise PupilMessageError(f"payload map key {key!r} is not a string")
+            _check_keys(item, depth + 1)
+    elif isinstance(value, list | tuple):
+        for item in value:
+            _check_keys(item, depth + 1)
+
+
+def pack(payload: Mapping[str, Any]) -> list[bytes]:
+    """The frames of one message: topic, msgpack payload, then the raw frames of `__raw_data__`."""
+    if "topic" not in payload or not isinstance(payload["topic"], str):
+        raise PupilMessageError("a payload needs a string 'topic'")
+    body = {k: v for k, v in payload.items() if k != RAW}
+    _check_keys(body)
+    try:
+        packed = msgpack.packb(body, use_bin_type=True)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise PupilMessageError(f"payload cannot be packed: {exc}") from exc
+    raw = [bytes(memoryview(b)) for b in payload.get(RAW, ())]
+    return [body["topic"].encode("utf-8"), packed, *raw]
+
+
+def unpack(frames: Sequence[bytes]) -> tuple[str, dict[str, Any]]:
+    """(topic, payload) of a received multipart message; extra frames go to payload['__raw_data__']."""
+    if len(frames) < 2:
+        raise PupilMessageError("a message needs at least a topic frame and a payload frame")
+    try:
+        topic = bytes(frames[0]).decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise PupilMessageError("topic is not UTF-8") from exc
+    if len(frames[1]) > MAX_PAYLOAD_BYTES:
+        raise PupilMessageError(f"payload of {len(frames[1])} bytes exceeds {MAX_PAYLOAD_BYTES}")
+    try:
+        payload = msgpack.unpackb(bytes(frames[1]), raw=False, strict_map_key=True)
+    except (ValueError, msgpack.ExtraData, msgpack.FormatError, msgpack.StackError, TypeError) as exc:
+        raise PupilMessageError(f"payload is not valid msgpack with string keys: {exc or type(exc).__name__}") from exc
+    if not isinstance(payload, dict):
+        raise PupilMessageError("payload is not a map")
+    _check_keys(payload)
+    if len(frames) > 2:
+        payload[RAW] = [bytes(f) for f in frames[2:]]
+    return topic, payload
+
+
+@dataclass(frozen=True)
+class Request:
+    """A parsed Pupil Remote request: `kind` and its argument (name, float, text or frames)."""
+
+    kind: str  # forward, sub_port, pub_port, record_start, record_stop, calibration_start,
+    # calibration_stop, time_sync, time_query, version, unknown, invalid
+    argument: Any = None
+
+
+def parse_request(frames: Sequence[bytes]) -> Request:
+    """Classify a Pupil Remote request (order as in Pupil Capture's controller)."""
+    if len(frames) > 1:
+        return Request("forward", list(frames))
+    try:
+        text = bytes(frames[0]).decode("utf-8") if frames else ""
+    except UnicodeDecodeError:
+        return Request("invalid", "request is not UTF-8")
+    fixed = {"SUB_PORT": "sub_port", "PUB_PORT": "pub_port", "r": "record_stop", "C": "calibration_start",
+             "c": "calibration_stop", "t": "time_query", "v": "version"}
+    if text in fixed:
+        return Request(fixed[text])
+    if text == "R" or text.startswith("R "):
+        return Request("record_start", text[2:] or None)
+    if text.startswith("T "):
+        try:
+            return Request("time_sync", float(text[2:]))
+        except ValueError:
+            return Request("unknown", text)
+    return Request("unknown", text)
+
+
+def notification(subject: str, **fields: Any) -> dict[str, Any]:
+    """A notification payload `notify.<subject>`."""
+    return {"subject": subject, "topic": f"notify.{subject}", **fields}
+
+
+def pupil_datum(eye_id: int, timestamp: float, centre: Sequence[float], axes: Sequence[float], angle_deg: float,
+                confidence: float, image_size: tuple[int, int], glints: list[dict[str, Any]] | None = None
+                ) -> dict[str, Any]:
+    """A `pupil.<id>.2d` datum; `centre` px (top-left origin), `axes` full lengths px."""
+    width, height = image_size
+    x, y = float(centre[0]), float(centre[1])
+    return {
+        "topic": f"pupil.{eye_id}.2d", "id": eye_id, "method": "2d c++", "timestamp": float(timestamp),
+        "norm_pos": [x / width, 1.0 - y / height], "diameter": float(max(axes)), "confidence": float(confidence),
+        "ellipse": {"center": [x, y], "axes": [float(axes[0]), float(axes[1])], "angle": float(angle_deg)},
+        "glints": glints or [],
+    }
+
+
+def glint_datum(eye_id: int, timestamp: float, glints: list[dict[str, Any]]) -> dict[str, Any]:
+    """A `glint.<id>` datum: {center [x, y] px, led, valid} per LED."""
+    return {"topic": f"glint.{eye_id}", "id": eye_id, "timestamp": float(timestamp), "glints": glints}
+
+
+def frame_datum(eye_id: int, index: int, timestamp: float, width: int, height: int, fmt: str,
+                data: bytes) -> dict[str, Any]:
+    """A `frame.eye.<id>` message with its image as the raw frame."""
+    if fmt not in ("gray", "bgr", "jpeg"):
+        raise PupilMessageError(f"frame format {fmt!r}: expected gray, bgr or jpeg")
+    return {"topic": f"frame.eye.{eye_id}", "width": int(width), "height": int(height), "index": int(index),
+            "timestamp": float(timestamp), "format": fmt, RAW: [data]}
+
+
+def gaze_datum(eye_ids: Sequence[int], timestamp: float, norm_pos: Sequence[float], confidence: float,
+               base_data: list[dict[str, Any]]) -> dict[str, Any]:
+    """A `gaze.2d.<ids>.` datum, `norm_pos` on the screen (origin bottom-left)."""
+    ids = "".join(str(i) for i in sorted(eye_ids))
+    return {"topic": f"gaze.2d.{ids}.", "norm_pos": [float(norm_pos[0]), float(norm_pos[1])],
+            "confidence": float(confidence), "timestamp": float(timestamp), "base_data": base_data}
