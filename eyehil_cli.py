@@ -12,6 +12,12 @@ import sys
 
 COMMANDS: dict[str, str] = {
     "simulate": "emulator.cli_simulate:register",
+    "emulate": "emulator.device.cli:register",
+    "info": "drivers.cli:register_info",
+    "stream": "drivers.cli:register_stream",
+    "calibrate": "drivers.cli:register_calibrate",
+    "record": "drivers.cli:register_record",
+    "render": "emulator.cli_render:register",
     "study": "analysis.cli_study:register",
 }
 

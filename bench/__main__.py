@@ -10,7 +10,7 @@ import importlib
 import os
 import platform
 
-BENCHMARKS = ["forward", "study"]
+BENCHMARKS = ["forward", "study", "render", "usbip", "device"]
 
 
 def main() -> int:

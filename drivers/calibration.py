@@ -1,0 +1,173 @@
+"""Calibrate gaze through the device: show targets, collect fixations, fit, validate, then map samples to gaze.
+
+For each target the host shows it (on the emulator: the STIMULUS side channel, `Tracker.stimulus`),
+discards the samples of the first `settle_s` after the device acknowledged it (the subject's latency
+and saccade), and averages the usable samples of the next `collect_s` (device time) into one fixation.
+Calibration targets come first, then validation targets. Methods:
+
+- ``guestrin``: Guestrin & Eizenman 2006, model-based (`drivers.gaze.guestrin`), one eye, the LEDs of
+  the geometry file (two);
+- ``blignaut``: Blignaut 2014 interpolation (`drivers.gaze.blignaut`), both eyes, LED 0.
+
+Targets and estimates are in SCREEN mm of `drivers.gaze.geometry` (from the screen centre along world
++x = the subject's left, and +y = up). The STIMULUS message wants mm from the top-left corner, x to the
+subject's right, y down: `screen_to_stimulus` is the one conversion (it assumes the default screen axes).
+Validation error: the angle at the world origin (the subject's reference eye position, midway between
+the eyes) between the directions to the estimate and to the target, degrees.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from drivers.client import Tracker
+from drivers.errors import CalibrationError
+from drivers.features import binocular_samples, eye_samples, fixation_mean
+from drivers.gaze.base import BinocularSamples, Calibration, EyeSamples, angular_error_deg
+from drivers.gaze.blignaut import BlignautEstimator
+from drivers.gaze.geometry import Screen, TrackerGeometry
+from drivers.gaze.guestrin import GuestrinEstimator
+from drivers.wire import Sample
+from protocols.enums import Capability, Eye, EyeSelect
+
+METHODS = ("guestrin", "blignaut")
+
+
+def grid(screen: Screen, columns: int, rows: int, fraction: float = 1.0) -> np.ndarray:
+    """Targets (rows * columns, 2) screen mm spanning `fraction` of the screen, row by row from the top."""
+    return screen.grid(columns, rows).reshape(-1, 2) * fraction
+
+
+def screen_to_stimulus(screen: Screen, xy_mm: np.ndarray) -> np.ndarray:
+    """STIMULUS coordinates (..., 2) (mm from the top-left corner, x right, y down as the subject sees the
+    screen) of screen coordinates (..., 2) (mm from the centre, x toward the subject's left, y up)."""
+    width, height = screen.size_mm
+    xy = np.asarray(xy_mm, float)
+    return np.stack([width / 2 - xy[..., 0], height / 2 - xy[..., 1]], axis=-1)
+
+
+def validation_errors_deg(geometry: TrackerGeometry, estimates_mm: np.ndarray, targets_mm: np.ndarray) -> np.ndarray:
+    """Angle (deg) at the world origin between estimate and target, both screen mm (..., 2)."""
+    to_world = geometry.screen.to_world
+    return angular_error_deg(np.zeros(3), to_world(estimates_mm), to_world(targets_mm))
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Targets (screen mm) and timing (device seconds)."""
+
+    calibration_mm: np.ndarray
+    validation_mm: np.ndarray
+    settle_s: float = 0.5
+    collect_s: float = 0.2
+
+    @classmethod
+    def default(cls, screen: Screen, **timing: float) -> Plan:
+        """3 x 3 over the whole screen (corners included); validation on the 2 x 2 between them."""
+        return cls(grid(screen, 3, 3), grid(screen, 2, 2, 0.5), **timing)
+
+
+@dataclass(frozen=True)
+class Result:
+    """A calibration and its validation: errors (V,) deg, estimates (V, 2) screen mm, fixations used."""
+
+    method: str
+    calibration: Calibration
+    plan: Plan
+    estimates_mm: np.ndarray
+    errors_deg: np.ndarray
+    fixations: list[list[Sample]]
+
+    @property
+    def mean_error_deg(self) -> float:
+        return float(np.nanmean(self.errors_deg))
+
+
+def collect_fixation(tracker: Tracker, target_id: int, xy_mm: np.ndarray, screen: Screen, plan: Plan) -> list[Sample]:
+    """Show one target; return the samples of its collection window (device time)."""
+    x, y = screen_to_stimulus(screen, xy_mm)
+    onset = tracker.stimulus(target_id, float(x), float(y))
+    start, end = onset + round(plan.settle_s * 1e6), onset + round((plan.settle_s + plan.collect_s) * 1e6)
+    window: list[Sample] = []
+    for sample in tracker.samples():
+        if sample.device_us >= end:
+            return window
+        if sample.device_us >= start:
+            window.append(sample)
+    return window
+
+
+def _stack(fixations: list[EyeSamples]) -> EyeSamples:
+    return EyeSamples(np.stack([f.pupil_px for f in fixations]), np.stack([f.glints_px for f in fixations]),
+                      np.stack([f.valid for f in fixations]))
+
+
+def fixation_samples(fixations: list[list[Sample]], method: str, eye: Eye, n_leds: int
+                     ) -> EyeSamples | BinocularSamples:
+    """One averaged sample per fixation (K,): one eye for guestrin, both for blignaut."""
+    if method == "guestrin":
+        return _stack([fixation_mean(f, eye, n_leds) for f in fixations])
+    return BinocularSamples(*(_stack([fixation_mean(f, e, n_leds) for f in fixations]) for e in (Eye.RIGHT, Eye.LEFT)))
+
+
+def _subset(samples: EyeSamples | BinocularSamples, index: slice) -> EyeSamples | BinocularSamples:
+    if isinstance(samples, BinocularSamples):
+        return BinocularSamples(_subset(samples.right, index), _subset(samples.left, index))
+    return EyeSamples(samples.pupil_px[index], samples.glints_px[index], samples.valid[index])
+
+
+def estimator_for(method: str, geometry: TrackerGeometry, eye: Eye, model: int):
+    """The estimator of `method` (guestrin: the `eye`; blignaut: published model `model`)."""
+    if method == "guestrin":
+        return GuestrinEstimator(geometry, eye="right" if eye == Eye.RIGHT else "left")
+    if method == "blignaut":
+        return BlignautEstimator.from_model(model)
+    raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+
+
+def configure_for(tracker: Tracker, method: str, geometry: TrackerGeometry, eye: Eye, rate_hz: int | None) -> int:
+    """CONFIGURE the stream a method needs (guestrin: the geometry's LEDs; blignaut: LED 0, both eyes);
+    return the number of glints per eye."""
+    info = tracker.info
+    if method == "blignaut" and Capability.BINOCULAR not in info.capabilities:
+        raise CalibrationError("blignaut needs both eyes: the device is not binocular")
+    if method == "guestrin" and geometry.n_leds > info.led_count:
+        raise CalibrationError(f"the geometry has {geometry.n_leds} LEDs, the device {info.led_count}")
+    leds = geometry.n_leds if method == "guestrin" else 1
+    eyes = EyeSelect.BOTH if method == "blignaut" else EyeSelect(1 << eye)
+    tracker.configure(leds=leds, rate_hz=rate_hz, eyes=eyes)
+    return leds
+
+
+def calibrate(tracker: Tracker, geometry: TrackerGeometry, method: str, plan: Plan | None = None, *,
+              eye: Eye = Eye.RIGHT, model: int = 3, rate_hz: int | None = None) -> Result:
+    """Configure, stream, run `plan`'s targets, fit on the calibration ones, validate on the others; stop."""
+    plan = plan or Plan.default(geometry.screen)
+    estimator = estimator_for(method, geometry, eye, model)
+    n_leds = configure_for(tracker, method, geometry, eye, rate_hz)
+    targets = np.concatenate([plan.calibration_mm, plan.validation_mm])
+    tracker.start()
+    try:
+        fixations = [collect_fixation(tracker, i, xy, geometry.screen, plan) for i, xy in enumerate(targets)]
+    finally:
+        tracker.stop()
+    samples = fixation_samples(fixations, method, eye, n_leds)
+    k = len(plan.calibration_mm)
+    fit = estimator.calibrate(_subset(samples, slice(0, k)), plan.calibration_mm)
+    if not fit:
+        raise CalibrationError(f"{method}: {fit.reason}")
+    estimates = fit.estimate(_subset(samples, slice(k, None)))
+    errors = validation_errors_deg(geometry, estimates, plan.validation_mm)
+    return Result(method, fit, plan, estimates, errors, fixations)
+
+
+def gaze(tracker: Tracker, result: Result, eye: Eye = Eye.RIGHT, count: int | None = None
+         ) -> Iterator[tuple[Sample, np.ndarray]]:
+    """Stream (sample, gaze (2,) screen mm; NaN when unusable) with the calibration of `result` (call start first)."""
+    for sample in tracker.samples(count=count):
+        one = [sample]
+        samples = eye_samples(one, eye) if result.method == "guestrin" else binocular_samples(one)
+        yield sample, result.calibration.estimate(samples)[0]

@@ -1,0 +1,183 @@
+"""The host end of a native-protocol link: sequence-numbered sends, and a receive path that never hangs.
+
+`Wire` owns one SerialLike (`drivers.links`) and a `protocols.NativeReceiver`. `pump(wait_s)` reads
+whatever arrives within `wait_s` seconds (waiting with select() on the link's descriptor when it has
+one, else with the link's own read timeout), decodes it, and sorts it: FEATURES become `Sample`s in
+`samples`, every other message goes to `replies` with its arrival time. Faults are counted, never
+raised (`HostStats`); only a failing link raises (`LinkError`). Host times are microseconds of
+``time.monotonic_ns()``.
+"""
+
+from __future__ import annotations
+
+import select
+import time
+from collections import deque
+from dataclasses import dataclass, fields
+
+from drivers.errors import LinkError
+from protocols.header import SEQ_MODULUS, seq_gap
+from protocols.native import DEVICE_TYPES, Message, encode
+from protocols.replies import ErrorReply
+from protocols.samples import EyeFeatures, Features
+from protocols.stream import NativeReceiver, Received
+
+CHUNK = 65536
+MAX_BUFFERED_SAMPLES = 200_000
+
+
+def host_now_us() -> int:
+    """The host's monotonic clock, microseconds."""
+    return time.monotonic_ns() // 1000
+
+
+@dataclass(frozen=True, slots=True)
+class Sample:
+    """One FEATURES message as received: device time (mid-exposure) and host arrival time, us.
+
+    `lost_before`: link frames lost just before it (sequence gap); `skipped_before`: camera exposures
+    missing just before it (frame_id gap: lost on the link, or never sent by the device).
+    """
+
+    seq: int
+    frame_id: int
+    device_us: int
+    host_us: int
+    eyes: tuple[EyeFeatures, ...]
+    lost_before: int = 0
+    skipped_before: int = 0
+
+    def eye(self, which: int) -> EyeFeatures | None:
+        """The record of eye `which` (protocols.Eye), or None if the stream does not carry it."""
+        return next((e for e in self.eyes if e.eye == which), None)
+
+
+@dataclass(frozen=True, slots=True)
+class Reply:
+    """A non-sample message and when it arrived (host us)."""
+
+    received: Received
+    host_us: int
+
+    @property
+    def message(self) -> Message:
+        return self.received.message
+
+
+@dataclass
+class HostStats:
+    """What the host counted on this link (receive side, plus its own command bookkeeping)."""
+
+    rx_frames: int = 0  # frames decoded
+    samples: int = 0  # FEATURES received
+    lost_frames: int = 0  # sequence gaps: frames the device sent that never arrived intact
+    out_of_order: int = 0  # duplicate, late or restarted sequence numbers
+    skipped_exposures: int = 0  # frame_id gaps within a stream
+    crc_errors: int = 0
+    framing_errors: int = 0
+    oversized_frames: int = 0
+    unknown_messages: int = 0
+    version_errors: int = 0
+    malformed_messages: int = 0
+    errors_received: int = 0  # ERROR replies
+    retries: int = 0  # commands re-sent after a missing response
+    stale_replies: int = 0  # replies that matched no outstanding command
+    samples_overflowed: int = 0  # samples discarded because nobody read them
+
+    def as_dict(self) -> dict[str, int]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+class Wire:
+    """See the module docstring."""
+
+    def __init__(self, link, seq0: int = 1) -> None:
+        """Use `link` (SerialLike); commands are numbered from `seq0`."""
+        self.link = link
+        self.receiver = NativeReceiver(accept=DEVICE_TYPES)
+        self.samples: deque[Sample] = deque()
+        self.replies: deque[Reply] = deque()
+        self.stats = HostStats()
+        self.seq = seq0 % SEQ_MODULUS
+        self._last_frame_id: int | None = None
+        self._select = hasattr(link, "fileno")
+        if self._select:
+            link.timeout = 0
+
+    def send(self, message: Message) -> tuple[int, int]:
+        """Encode and write `message`; return its (seq, host timestamp us)."""
+        seq, now = self.seq, host_now_us()
+        self.seq = (seq + 1) % SEQ_MODULUS
+        self.write(encode(message, seq, now))
+        return seq, now
+
+    def write(self, data: bytes) -> None:
+        """Raw bytes to the device."""
+        try:
+            self.link.write(data)
+        except OSError as exc:
+            raise LinkError(f"write failed: {exc}") from exc
+
+    def new_stream(self) -> None:
+        """A stream starts: frame ids get a new baseline."""
+        self._last_frame_id = None
+
+    def _read(self, wait_s: float) -> bytes:
+        """Bytes arriving within `wait_s` (b"" if none)."""
+        link = self.link
+        try:
+            if self._select:
+                data = link.read(CHUNK)
+                if not data and wait_s > 0 and select.select([link.fileno()], [], [], wait_s)[0]:
+                    data = link.read(CHUNK)
+                return data
+            link.timeout = 0
+            data = link.read(CHUNK)
+            if not data and wait_s > 0:
+                link.timeout = wait_s
+                data = link.read(1)
+                link.timeout = 0
+                data += link.read(CHUNK) if data else b""
+            return data
+        except OSError as exc:
+            raise LinkError(f"read failed: {exc}") from exc
+
+    def pump(self, wait_s: float = 0.0) -> int:
+        """Read and dispatch what arrives within `wait_s` s; return the number of bytes read."""
+        data = self._read(max(0.0, wait_s))
+        if data:
+            now = host_now_us()
+            for event in self.receiver.feed(data):
+                if isinstance(event, Received):
+                    self._dispatch(event, now)
+            self._sync_counters()
+        return len(data)
+
+    def _dispatch(self, event: Received, now: int) -> None:
+        message = event.message
+        if not isinstance(message, Features):
+            self.stats.errors_received += isinstance(message, ErrorReply)
+            self.replies.append(Reply(event, now))
+            return
+        skipped = 0
+        if self._last_frame_id is not None:
+            skipped = max(0, seq_gap(self._last_frame_id, message.frame_id))
+        self._last_frame_id = message.frame_id
+        self.stats.skipped_exposures += skipped
+        self.stats.samples += 1
+        if len(self.samples) >= MAX_BUFFERED_SAMPLES:
+            self.samples.popleft()
+            self.stats.samples_overflowed += 1
+        h = event.header
+        self.samples.append(Sample(h.seq, message.frame_id, h.timestamp_us, now, message.eyes, event.lost_before,
+                                   skipped))
+
+    def _sync_counters(self) -> None:
+        c = self.receiver.counters
+        for name in ("rx_frames", "lost_frames", "out_of_order", "crc_errors", "framing_errors", "oversized_frames",
+                     "unknown_messages", "version_errors", "malformed_messages"):
+            setattr(self.stats, name, getattr(c, name))
+
+    def close(self) -> None:
+        """Close the link."""
+        self.link.close()

@@ -1,0 +1,116 @@
+"""Build a virtual device from a few named options (command line, loop:// URLs, the pytest plugin).
+
+`DeviceOptions` names everything a device needs: the scene (camera, LEDs, screen, which eyes; `sides`
+overrides the eyes), the eye anatomy (an `emulator.eye.select` spec and an index into it), the head
+pose, the behaviour, the script (`"stimulus"`: follow the host's STIMULUS messages; `"demo"`: loop over
+the scene's targets with saccades, a pursuit and blinks), the mode (native or ISCAN), the default rate
+and the clock.
+
+URL form (loop://, and `--option` values): ``scene=blignaut2014&eyes=published&eye=3&clock=fast&rate=500``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, replace
+from urllib.parse import parse_qsl
+
+import numpy as np
+
+from emulator.device.clock import make_clock
+from emulator.device.gaze import Blink, Fixation, Pursuit, Segment
+from emulator.device.iscan import IscanTracker
+from emulator.device.solver import FeatureSolver, tracked_scene
+from emulator.device.subject import Behaviour, Subject
+from emulator.device.tracker import VirtualTracker
+from emulator.eye.select import eyes_from_spec
+from emulator.scene import HeadPose, Scene, load_scene
+
+
+@dataclass(frozen=True)
+class DeviceOptions:
+    """Everything that defines a virtual device; see the module docstring."""
+
+    scene: str = "guestrin2006"  # preset name or TOML path
+    eyes: str = "normative:navarro"  # emulator.eye.select spec
+    eye: int = 0  # which eye of the spec (both of the subject's eyes share this anatomy)
+    sides: str = ""  # eyes the camera sees: "right", "left", "both"; "" = the scene's own
+    seed: int = 0  # for sampled eyes and the subject's random behaviour
+    head: HeadPose = field(default_factory=HeadPose)
+    behaviour: Behaviour = field(default_factory=Behaviour)
+    script: str = "stimulus"  # or "demo"
+    mode: str = "native"  # or "iscan"
+    rate_hz: int = 250  # default rate (native) or the fixed rate (ISCAN)
+    clock: str = "real"  # or "fast"
+    speed: float = 1.0  # real clock: device seconds per wall second
+
+    def __post_init__(self) -> None:
+        if self.script not in ("stimulus", "demo"):
+            raise ValueError(f"script must be 'stimulus' or 'demo', got {self.script!r}")
+        if self.sides not in ("", "right", "left", "both"):
+            raise ValueError(f"sides must be 'right', 'left' or 'both', got {self.sides!r}")
+        if self.mode not in ("native", "iscan"):
+            raise ValueError(f"mode must be 'native' or 'iscan', got {self.mode!r}")
+
+
+def demo_script(scene: Scene) -> list[Segment]:
+    """Fixations (0.8 s) on up to 3 x 3 of the scene's targets, a blink every third, a pursuit across the screen."""
+    cols, rows = scene.screen.grid
+    grid = scene.targets().reshape(cols, rows, 3)
+    pick_c, pick_r = np.unique(np.linspace(0, cols - 1, 3).round()), np.unique(np.linspace(0, rows - 1, 3).round())
+    points = [tuple(scene.screen.to_screen(grid[int(c), int(r)])) for r in pick_r for c in pick_c]
+    script: list[Segment] = []
+    for i, p in enumerate(points):
+        script.append(Fixation((float(p[0]), float(p[1])), 0.8))
+        if i % 3 == 2:
+            script.append(Blink(0.15))
+    width = scene.screen.size[0]
+    script += [Fixation((0.4 * width, 0.0), 0.3), Pursuit((-0.4 * width, 0.0), 10.0), Fixation((0.0, 0.0), 0.5)]
+    return script
+
+
+def build_subject(options: DeviceOptions) -> Subject:
+    """The simulated subject of `options`."""
+    scene = load_scene(options.scene)
+    if options.sides:
+        scene = tracked_scene(scene, ("right", "left") if options.sides == "both" else (options.sides,))
+    eyes, _ = eyes_from_spec(options.eyes, options.seed)
+    if not 0 <= options.eye < len(eyes):
+        raise ValueError(f"eye {options.eye} out of range: the spec {options.eyes!r} gives {len(eyes)} eye(s)")
+    solver = FeatureSolver(eyes[options.eye], scene, options.head)
+    script = demo_script(scene) if options.script == "demo" else None
+    return Subject(solver, options.behaviour, rng=np.random.default_rng(options.seed), script=script)
+
+
+def build_device(options: DeviceOptions | None = None) -> VirtualTracker | IscanTracker:
+    """A device core (native `VirtualTracker` or `IscanTracker`) as `options` say."""
+    options = options or DeviceOptions()
+    clock = make_clock(options.clock, options.speed)
+    subject = build_subject(options)
+    if options.mode == "iscan":
+        return IscanTracker(subject, clock, rate_hz=options.rate_hz)
+    return VirtualTracker(subject, clock, default_rate_hz=options.rate_hz)
+
+
+_HEAD_KEYS = ("x", "y", "z", "yaw", "pitch", "roll")
+_BEHAVIOUR_KEYS = {"latency": "latency_s", "latency_sd": "latency_sd_s", "jitter": "jitter_deg",
+                   "blinks": "blink_rate_hz", "blink_s": "blink_s"}
+
+
+def options_from_query(query: str, base: DeviceOptions | None = None) -> DeviceOptions:
+    """`base` (default options) updated from ``key=value&...``; keys: the fields of `DeviceOptions` (rate for
+    rate_hz), head x, y, z, yaw, pitch, roll (mm, deg) and behaviour latency, latency_sd, jitter, blinks, blink_s."""
+    base = base or DeviceOptions()
+    names = {f.name: f for f in fields(DeviceOptions)} | {"rate": next(f for f in fields(DeviceOptions)
+                                                                      if f.name == "rate_hz")}
+    plain, head, behaviour = {}, {}, {}
+    for key, value in parse_qsl(query, keep_blank_values=True, strict_parsing=bool(query)):
+        if key in _HEAD_KEYS:
+            head[key] = float(value)
+        elif key in _BEHAVIOUR_KEYS:
+            behaviour[_BEHAVIOUR_KEYS[key]] = float(value)
+        elif key in names and key not in ("head", "behaviour"):
+            f = names[key]
+            plain[f.name] = {"int": int, "float": float}.get(str(f.type), str)(value)
+        else:
+            raise ValueError(f"unknown device option {key!r}")
+    return replace(base, head=replace(base.head, **head), behaviour=replace(base.behaviour, **behaviour), **plain)

@@ -1,0 +1,176 @@
+"""The virtual camera: exposures at the configured rate, and what its feature detector reports.
+
+Exposure k of a stream started at device time t0 (us) has its mid-exposure time
+t_k = t0 + round((k + 1) * 1e6 / rate) and frame id (first + k) mod 2^32, where `first` counts every
+exposure since power-up (docs/protocol.md section 5.3). Features for upcoming exposures are prepared in
+blocks of about 20 ms (one `Subject.observe` call each); `invalidate(t)` forgets prepared exposures
+from t on when the subject's plan changes.
+
+Detection (`detect`), per selected eye (right, left) and enabled LED, in full-sensor pixels: a pupil is
+DETECTED if its features exist, the eye is open and its centre lies in the region (the region of
+interest, or the sensor); PARTIAL if its bounding box leaves the sensor, CLIPPED if it leaves the region
+of interest; BLINK while the eyes are closed. A glint is VALID if it exists, the eye is open and it lies
+in the region. Fields their flags declare meaningless are sent as 0.0 (never NaN).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+
+from emulator.device.solver import PUPIL_CHANNELS, ellipse_from_moments
+from emulator.device.subject import Subject
+from protocols.batch import FeaturesBatch
+from protocols.enums import Eye, GlintFlags, PupilFlags
+
+PREPARE_S = 0.02  # features are prepared this far ahead (device seconds)
+
+
+@dataclass(frozen=True)
+class Selection:
+    """What a stream reports: eyes (Eye values, right before left), the first `leds` LEDs, a region."""
+
+    eyes: tuple[Eye, ...]
+    leds: int
+    roi: tuple[int, int, int, int] | None = None  # x, y, w, h px; None = the full sensor
+
+
+@dataclass(frozen=True)
+class Exposures:
+    """Consecutive exposures: detected features and mid-exposure times (N,) us."""
+
+    batch: FeaturesBatch
+    time_us: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.time_us)
+
+    def __getitem__(self, s: slice) -> Exposures:
+        """The exposures in slice `s` (the eye ids are shared)."""
+        per_sample = {f.name: getattr(self.batch, f.name)[s] for f in fields(self.batch) if f.name != "eye"}
+        return Exposures(replace(self.batch, **per_sample), self.time_us[s])
+
+
+def _inside(xy: np.ndarray, region: tuple[int, int, int, int]) -> np.ndarray:
+    """True where pixel coordinates (..., 2) lie on the pixels of region (x, y, w, h)."""
+    x, y, w, h = region
+    return (xy[..., 0] >= x - 0.5) & (xy[..., 0] < x + w - 0.5) & (xy[..., 1] >= y - 0.5) & (xy[..., 1] < y + h - 0.5)
+
+
+def _box_inside(centre: np.ndarray, half: np.ndarray, region: tuple[int, int, int, int]) -> np.ndarray:
+    """True where the boxes centre +- half (..., 2) lie wholly in region (x, y, w, h)."""
+    return _inside(centre - half, region) & _inside(centre + half, region)
+
+
+def detect(values: np.ndarray, blink: np.ndarray, sel: Selection, tracked: tuple[Eye, ...],
+           sensor: tuple[int, int]) -> dict[str, np.ndarray]:
+    """FEATURES fields (arrays over N samples, E selected eyes, G glints) from observed channels (N, E', C)."""
+    full = (0, 0, *sensor)
+    region = sel.roi or full
+    n = len(values)
+    cols = [tracked.index(e) if e in tracked else None for e in sel.eyes]
+    v = np.stack([values[:, c] if c is not None else np.full(values.shape[::2], np.nan) for c in cols], axis=1)
+    centre, moments = v[..., 0:2], v[..., 2:PUPIL_CHANNELS]
+    glints = v[..., PUPIL_CHANNELS:PUPIL_CHANNELS + 2 * sel.leds].reshape(n, len(cols), sel.leds, 2)
+    open_eye = ~blink[:, None]
+    axes, angle = ellipse_from_moments(np.nan_to_num(moments))
+    half = np.sqrt(np.maximum(np.nan_to_num(moments[..., :2]), 0.0))
+    found = np.isfinite(v[..., :PUPIL_CHANNELS]).all(-1) & open_eye & _inside(np.nan_to_num(centre), region)
+    flags = np.where(found, PupilFlags.DETECTED, 0)
+    flags |= np.where(found & ~_box_inside(centre, half, full), PupilFlags.PARTIAL, 0)
+    flags |= np.where(found & (sel.roi is not None) & ~_box_inside(centre, half, region), PupilFlags.CLIPPED, 0)
+    flags |= np.where(blink[:, None], PupilFlags.BLINK, 0)
+    glint_ok = np.isfinite(glints).all(-1) & open_eye[..., None] & _inside(np.nan_to_num(glints), region)
+    return {
+        "flags": flags.astype(np.uint8),
+        "centre": np.where(found[..., None], centre, 0.0), "axes": np.where(found[..., None], axes, 0.0),
+        "angle_deg": np.where(found, angle, 0.0), "confidence": found.astype(float),
+        "glint_xy": np.where(glint_ok[..., None], glints, 0.0),
+        "glint_flags": np.where(glint_ok, GlintFlags.VALID, 0).astype(np.uint8),
+    }
+
+
+class Camera:
+    """Exposure schedule, frame ids and prepared features of one subject; see the module docstring."""
+
+    def __init__(self, subject: Subject, sensor: tuple[int, int], tracked: tuple[Eye, ...]) -> None:
+        """`tracked`: the eyes the subject simulates, in the order of its feature arrays."""
+        self.subject, self.sensor, self.tracked = subject, sensor, tracked
+        self.frames_since_power_up = 0
+        self._t0 = self._k = 0
+        self._rate = 1
+        self._sel = Selection(tracked, 1)
+        self._ready: Exposures | None = None
+
+    def start(self, t0_us: int, rate_hz: int, selection: Selection) -> None:
+        """Begin exposing at `rate_hz` after `t0_us`."""
+        self._t0, self._rate, self._sel, self._k, self._ready = t0_us, rate_hz, selection, 0, None
+
+    def stop(self) -> None:
+        """End the stream; prepared exposures are forgotten."""
+        self._ready = None
+
+    def time_of(self, k: int) -> int:
+        """Mid-exposure time (us) of exposure `k` of this stream."""
+        return self._t0 + round((k + 1) * 1e6 / self._rate)
+
+    @property
+    def taken(self) -> int:
+        """Exposures of this stream taken or skipped so far (the next one is `time_of(taken)`)."""
+        return self._k
+
+    def due(self, now_us: int) -> int:
+        """Exposures whose mid-time is at or before `now_us` and not yet taken."""
+        k_now = int((now_us - self._t0) * self._rate // 1_000_000) - 1  # last k with time_of(k) <= now (approx.)
+        while self.time_of(k_now + 1) <= now_us:
+            k_now += 1
+        while k_now >= self._k and self.time_of(k_now) > now_us:
+            k_now -= 1
+        return max(0, k_now + 1 - self._k)
+
+    def take(self, count: int) -> Exposures:
+        """The next `count` exposures, detected."""
+        while self._ready is None or len(self._ready) < count:
+            self._prepare(max(count - (0 if self._ready is None else len(self._ready)), 1))
+        out, self._ready = self._ready[:count], self._ready[count:]
+        self._advance(count)
+        return out
+
+    def skip(self, count: int) -> None:
+        """Drop the next `count` exposures (a link too slow): they keep their frame ids, unsent."""
+        ready = 0 if self._ready is None else len(self._ready)
+        self._ready = None if count >= ready else self._ready[count:]
+        self._advance(count)
+
+    def invalidate(self, from_us: int) -> None:
+        """Forget prepared exposures at or after `from_us`."""
+        if self._ready is not None:
+            self._ready = self._ready[: int(np.searchsorted(self._ready.time_us, from_us))]
+
+    def _advance(self, count: int) -> None:
+        self._k += count
+        self.frames_since_power_up += count
+
+    def _prepare(self, at_least: int) -> None:
+        """Observe and detect the next block of exposures after those already prepared."""
+        have = 0 if self._ready is None else len(self._ready)
+        count = max(at_least, round(self._rate * PREPARE_S))
+        k = np.arange(self._k + have, self._k + have + count)
+        times = self._t0 + np.round((k + 1) * 1e6 / self._rate).astype(np.int64)
+        obs = self.subject.observe(times)
+        fields_ = detect(obs.values, obs.blink, self._sel, self.tracked, self.sensor)
+        first = self.frames_since_power_up + have
+        batch = FeaturesBatch(
+            frame_id=((first + np.arange(count)) % (1 << 32)).astype(np.uint32), eye=np.array(self._sel.eyes),
+            glint_led=np.broadcast_to(np.arange(self._sel.leds), (count, len(self._sel.eyes), self._sel.leds)),
+            **fields_)
+        new = Exposures(batch, times)
+        self._ready = new if self._ready is None else _concat(self._ready, new)
+
+
+def _concat(a: Exposures, b: Exposures) -> Exposures:
+    """Exposures a then b (same eyes)."""
+    joined = {f.name: np.concatenate([getattr(a.batch, f.name), getattr(b.batch, f.name)])
+              for f in fields(a.batch) if f.name != "eye"}
+    return Exposures(replace(a.batch, **joined), np.concatenate([a.time_us, b.time_us]))

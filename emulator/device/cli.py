@@ -1,0 +1,94 @@
+"""`eyehil emulate`: run a virtual eye tracker on a link until interrupted.
+
+    eyehil emulate --link pty                       # prints the pseudo-terminal's path; open it as a serial port
+    eyehil emulate --link tcp --port 5555           # pyserial socket://127.0.0.1:5555
+    eyehil emulate --link pty --mode iscan --rate 120
+    eyehil emulate --scene blignaut2014 --write-geometry blignaut.toml   # the host's setup file
+
+It prints a line ``url: <what a host opens>`` once the link is up. The simulated subject follows the host's
+STIMULUS messages (`--script stimulus`, default) or loops over the scene's targets (`--script demo`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import importlib
+import signal
+import threading
+
+from emulator.device.build import DeviceOptions, build_device, options_from_query
+from emulator.device.links import LinkRunner
+from emulator.scene import preset_names
+
+#: link name -> "module:class"; the class takes (host, port) keywords where they mean something.
+LINKS: dict[str, str] = {
+    "pty": "emulator.device.pty_link:PtyLink",
+    "tcp": "emulator.device.tcp_link:TcpLink",
+    "usbip": "emulator.device.usbip_link:UsbipLink",
+}
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("emulate", help="run a virtual eye tracker on a pseudo-terminal, TCP or USB/IP link",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--link", choices=sorted(LINKS), default="pty", help="transport (default pty)")
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (tcp, usbip; default 127.0.0.1)")
+    p.add_argument("--port", type=int, default=0, help="port (tcp default: any free port; usbip default 3240)")
+    p.add_argument("--scene", default="guestrin2006", help=f"preset ({', '.join(preset_names())}) or TOML path")
+    p.add_argument("--eyes", default="normative:navarro", help="published | sample:N | normative:NAME")
+    p.add_argument("--eye", type=int, default=0, help="which eye of --eyes (default 0)")
+    p.add_argument("--sides", choices=["right", "left", "both"], help="eyes the camera sees (default: the scene's)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (sampled eyes, behaviour)")
+    p.add_argument("--head", default="", help="head pose, e.g. 'x=30,z=-40,yaw=5' (mm, deg)")
+    p.add_argument("--script", choices=["stimulus", "demo"], default="stimulus", help="subject behaviour")
+    p.add_argument("--mode", choices=["native", "iscan"], default="native", help="protocol (default native)")
+    p.add_argument("--rate", type=int, default=250, help="default sample rate, Hz (ISCAN: the rate)")
+    p.add_argument("--clock", choices=["real", "fast"], default="real", help="real time or as fast as possible")
+    p.add_argument("--speed", type=float, default=1.0, help="real clock: device seconds per wall second")
+    p.add_argument("--behaviour", default="", help="e.g. 'latency=0.2,jitter=0.05,blinks=0.3' (s, deg, Hz)")
+    p.add_argument("--write-geometry", metavar="FILE", help="write the host's tracker geometry (TOML) for the scene")
+    p.add_argument("--duration", type=float, help="stop after this many seconds (default: until interrupted)")
+    p.set_defaults(func=run)
+
+
+def options(args: argparse.Namespace) -> DeviceOptions:
+    """`DeviceOptions` from the command line."""
+    base = DeviceOptions(scene=args.scene, eyes=args.eyes, eye=args.eye, sides=args.sides or "", seed=args.seed,
+                         script=args.script,
+                         mode=args.mode, rate_hz=args.rate, clock=args.clock, speed=args.speed)
+    query = "&".join(part for part in (args.head, args.behaviour) if part).replace(",", "&")
+    return options_from_query(query, base)
+
+
+def make_link(kind: str, host: str, port: int):
+    """Instantiate the link class named in `LINKS` (imported only now)."""
+    module, cls = LINKS[kind].split(":")
+    try:
+        factory = getattr(importlib.import_module(module), cls)
+    except (ImportError, AttributeError) as exc:
+        raise ValueError(f"link {kind!r} is not available: {LINKS[kind]} cannot be loaded ({exc})") from exc
+    if kind == "pty":
+        return factory()
+    return factory(host=host, port=port or (3240 if kind == "usbip" else 0))
+
+
+def run(args: argparse.Namespace) -> int:
+    opts = options(args)
+    if args.write_geometry:
+        from emulator.device.setup_file import write_geometry
+        from emulator.scene import load_scene
+
+        print(f"geometry: {write_geometry(load_scene(opts.scene), args.write_geometry)}", flush=True)
+    stop = threading.Event()
+    previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())  # SIGTERM stops cleanly, like Ctrl-C
+    try:
+        with LinkRunner(build_device(opts), make_link(args.link, args.host, args.port)) as runner:
+            print(f"url: {runner.url}", flush=True)
+            print(f"eyehil emulate: {opts.mode} device, scene {opts.scene}, eyes {opts.eyes}[{opts.eye}], "
+                  f"script {opts.script}, {opts.clock} clock; Ctrl-C stops", flush=True)
+            with contextlib.suppress(KeyboardInterrupt):
+                stop.wait(args.duration)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    return 0

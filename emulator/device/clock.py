@@ -1,0 +1,99 @@
+"""The device's clock: microseconds since power-up, in real time or as fast as the link allows.
+
+A virtual tracker timestamps everything with one clock (docs/protocol.md section 4: u64 us of the
+sender's monotonic clock since an arbitrary epoch, here the clock's creation). Two kinds:
+
+- `RealTimeClock(speed=1.0)`: ``time.monotonic_ns`` since creation, optionally scaled (``speed=10``
+  runs the device ten times faster than the wall clock: a 500 Hz stream then carries 5000 samples per
+  wall-clock second, with device timestamps 2 ms apart).
+- `FastClock()`: "as fast as possible". Device time never runs slower than the wall clock, but the
+  streamer may `push` it ahead to the next sample's exposure time whenever the link has room, so
+  samples are produced as fast as the host consumes them (the link's buffers are the only pacing).
+
+Both are monotonic and thread-safe for one writer (the streamer) and any number of readers.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Protocol
+
+
+class Clock(Protocol):
+    """What a device core needs from a clock."""
+
+    fast: bool  # True if the streamer may push time ahead of the wall clock
+
+    def now_us(self) -> int:
+        """Device time (us since the clock's epoch); never decreases."""
+        ...
+
+    def push(self, t_us: int) -> None:
+        """Advance device time to at least `t_us` (fast clocks only; others ignore it)."""
+        ...
+
+    def wall_delay_s(self, t_us: int) -> float:
+        """Wall-clock seconds until device time reaches `t_us` (0 if it already has)."""
+        ...
+
+
+class RealTimeClock:
+    """Wall-clock time since creation, multiplied by `speed` (> 0)."""
+
+    fast = False
+
+    def __init__(self, speed: float = 1.0) -> None:
+        """Start the clock at 0 us now."""
+        if not speed > 0:
+            raise ValueError(f"clock speed must be > 0, got {speed}")
+        self.speed = float(speed)
+        self._t0_ns = time.monotonic_ns()
+
+    def now_us(self) -> int:
+        """Scaled microseconds since creation."""
+        return int((time.monotonic_ns() - self._t0_ns) * self.speed) // 1000
+
+    def push(self, t_us: int) -> None:
+        """Real time cannot be pushed: ignored."""
+
+    def wall_delay_s(self, t_us: int) -> float:
+        """Seconds of wall clock until device time `t_us`."""
+        return max(0.0, (t_us - self.now_us()) / 1e6 / self.speed)
+
+
+class FastClock:
+    """Device time = max(wall-clock time since creation, the latest `push`)."""
+
+    fast = True
+
+    def __init__(self) -> None:
+        """Start the clock at 0 us now."""
+        self._t0_ns = time.monotonic_ns()
+        self._pushed = 0
+        self._lock = threading.Lock()
+
+    def now_us(self) -> int:
+        """Microseconds since creation, or the pushed time if that is later."""
+        wall = (time.monotonic_ns() - self._t0_ns) // 1000
+        with self._lock:
+            self._pushed = max(self._pushed, wall)
+            return self._pushed
+
+    def push(self, t_us: int) -> None:
+        """Jump device time forward to `t_us` (never backward)."""
+        with self._lock:
+            self._pushed = max(self._pushed, int(t_us))
+
+    def wall_delay_s(self, t_us: int) -> float:
+        """A fast clock never makes the streamer wait."""
+        return 0.0
+
+
+def make_clock(kind: str = "real", speed: float = 1.0) -> Clock:
+    """`"real"` (optionally scaled by `speed`) or `"fast"`."""
+    if kind == "real":
+        return RealTimeClock(speed)
+    if kind == "fast":
+        return FastClock()
+    raise ValueError(f"clock must be 'real' or 'fast', got {kind!r}")

@@ -1,0 +1,56 @@
+"""The subcommands, run in-process: emulate (device side), info, stream, calibrate, record (host side)."""
+
+from __future__ import annotations
+
+import pytest
+from device_helpers import query
+
+from drivers.recording import read_recording
+from eyehil_cli import main
+
+
+@pytest.fixture
+def geometry(tmp_path, capsys):
+    path = tmp_path / "g.toml"
+    assert main(["emulate", "--link", "tcp", "--duration", "0", "--scene", "blignaut2014",
+                 "--write-geometry", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert f"geometry: {path}" in out and "url: socket://127.0.0.1:" in out
+    return path
+
+
+def test_emulate_on_a_pty_prints_its_path(capsys) -> None:
+    assert main(["emulate", "--link", "pty", "--duration", "0", "--mode", "iscan", "--behaviour", "jitter=0.02"]) == 0
+    assert "url: /dev/pts/" in capsys.readouterr().out
+
+
+def test_info_and_stream(capsys) -> None:
+    url = f"loop://?{query(rate=100)}"
+    assert main(["info", url]) == 0
+    assert "eyehil virtual tracker" in capsys.readouterr().out
+    assert main(["stream", url, "--duration", "0.2", "--every", "5"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("right pupil") == 5 and "21 samples" in out
+
+
+def test_calibrate(geometry, capsys) -> None:
+    url = f"loop://?{query(scene='blignaut2014', rate=250)}"
+    assert main(["calibrate", url, "--method", "blignaut", "--geometry", str(geometry), "--settle", "0.35",
+                 "--collect", "0.02", "--gaze-seconds", "0.1"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("validation target") == 4 and "mean validation error" in out and "gaze t=" in out
+
+
+def test_record_with_targets(geometry, tmp_path, capsys) -> None:
+    url = f"loop://?{query(scene='blignaut2014', rate=100)}"
+    out_file = tmp_path / "run.jsonl"
+    assert main(["record", url, "-o", str(out_file), "--duration", "0.5", "--targets", "2x2",
+                 "--geometry", str(geometry), "--dwell", "0.2"]) == 0
+    rec = read_recording(out_file)
+    assert rec.complete and len(rec) == 51 and len(rec.targets) == 3
+    assert "51 samples" in capsys.readouterr().out
+
+
+def test_errors_are_reported_not_raised(capsys) -> None:
+    assert main(["info", "nonsense://x"]) == 1
+    assert "SchemeUnavailableError" in capsys.readouterr().err

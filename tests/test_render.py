@@ -1,0 +1,154 @@
+"""Synthetic IR frames: outline geometry known answers, drawing, noise, windows, determinism, the CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from emulator.eye.normative import normative_eye
+from emulator.eye.published import published_eyes
+from emulator.forward import Poses, simulate
+from emulator.render import Appearance, RenderSettings, Sensor, render_features, render_full, render_roi, roi_window
+from emulator.render_geometry import eye_outlines, pupil_polar
+from emulator.scene import load_scene
+
+
+@pytest.fixture(scope="module")
+def guestrin():
+    scene = load_scene("guestrin2006")
+    eyes = published_eyes()[:3]
+    features = simulate(eyes, scene, head_positions=scene.head_positions[:1])
+    return scene, eyes, features, eye_outlines(features, eyes, scene)
+
+
+def test_fourier_outline_reproduces_an_ellipse_exactly():
+    t = 2 * np.pi * np.arange(30) / 30
+    a, b, phi, c = 20.0, 14.0, np.radians(30.0), np.array([100.3, 50.7])
+    z = (a * np.cos(t) + 1j * b * np.sin(t)) * np.exp(1j * phi)
+    points = np.stack([z.real, z.imag], -1) + c
+    theta, r, _ = pupil_polar(points, np.ones(30, bool), c, np.array([2 * a, 2 * b]), np.degrees(phi))
+    u, v = np.cos(theta - phi), np.sin(theta - phi)
+    np.testing.assert_allclose(r, 1.0 / np.sqrt((u / a) ** 2 + (v / b) ** 2), rtol=1e-9)
+    assert np.all(np.diff(theta) > 0)
+
+
+def test_limbus_is_the_projected_corneal_edge(guestrin):
+    scene, eyes, features, outline = guestrin
+    cam = scene.camera
+    depth = cam.to_camera(features.apex)[..., 2]
+    expected = 2 * eyes.limbus_radius[:, None, None, None] * cam.focal_px[0] / depth
+    np.testing.assert_allclose(outline.limbus_axes_px[..., 0], expected, rtol=0.03)
+    offset = np.linalg.norm(outline.limbus_centre_px - features.pupil_centre_px, axis=-1)
+    assert np.all(offset < 0.25 * outline.limbus_axes_px[..., 0])  # the pupil sits inside the iris
+
+
+def test_blink_closes_the_lids_and_hides_the_pupil(guestrin):
+    scene, eyes, features, _ = guestrin
+    closed = eye_outlines(features, eyes, scene, blink=1.0)
+    np.testing.assert_allclose(closed.upper_lid_px, closed.lower_lid_px, atol=1e-9)
+    frame = render_roi(closed[0, 0, 0, 4], np.random.default_rng(0))
+    assert frame.truth.pupil_visible[0] == 0.0 and not frame.truth.glint_visible.any()
+    assert frame.image.min() > 150  # only skin: no pupil, iris or glint
+    half = eye_outlines(features, eyes, scene, blink=0.5)[0, 0, 0, 4]
+    assert 0.0 < render_roi(half, np.random.default_rng(0)).truth.pupil_visible[0] < 1.0
+
+
+def test_lids_follow_gaze_elevation():
+    scene = load_scene("guestrin2006")
+    eye = normative_eye("navarro").as_batch()
+    features = simulate(eye, scene, poses=Poses(np.zeros(2), np.array([15.0, -15.0])),
+                        head_positions=scene.head_positions[:1])
+    outline = eye_outlines(features, eye, scene)
+    mid = outline.upper_lid_px.shape[-2] // 2
+    up, down = outline.upper_lid_px[0, 0, 0, :, mid, 1]
+    assert up < down - 10  # looking up raises the upper lid (image y decreases) by more than 10 px
+    assert np.all(outline.upper_lid_px[..., 1] <= outline.lower_lid_px[..., 1] + 1e-9)
+
+
+def test_frames_are_deterministic_given_the_generator(guestrin):
+    *_, outline = guestrin
+    sample = outline[1, 0, 0, 2]
+    a = render_roi(sample, np.random.default_rng(7)).image
+    b = render_roi(sample, np.random.default_rng(7)).image
+    c = render_roi(sample, np.random.default_rng(8)).image
+    assert a.dtype == np.uint8 and a.shape == (240, 320)
+    np.testing.assert_array_equal(a, b)
+    assert np.any(a != c)
+
+
+def test_noise_matches_read_and_shot_noise(guestrin):
+    *_, outline = guestrin
+    sample = outline[0, 0, 0, 4]
+    sensor = Sensor()
+    clean = render_roi(sample, np.random.default_rng(0), settings=RenderSettings(sensor=sensor.noiseless())).image
+    noisy = render_roi(sample, np.random.default_rng(0)).image
+    skin = Appearance().skin_dn
+    expected = np.sqrt(sensor.read_noise_dn**2 + skin * sensor.saturation_dn / sensor.full_well_e)
+    flat = clean == round(skin)
+    assert flat.mean() > 0.5
+    measured = np.std(noisy[flat].astype(float) - skin)
+    assert measured == pytest.approx(np.sqrt(expected**2 + 1 / 12), rel=0.05)  # + quantisation
+
+
+def test_glints_are_small_saturated_spots_at_their_ground_truth(guestrin):
+    *_, outline = guestrin
+    frame = render_roi(outline[0, 0, 0, 4], np.random.default_rng(0))
+    truth = frame.truth
+    assert truth.glint_visible.all()
+    for gx, gy in truth.glint_px[0] - frame.roi_xy:
+        patch = frame.image[round(gy) - 6:round(gy) + 7, round(gx) - 6:round(gx) + 7]
+        saturated = np.count_nonzero(patch == 255)
+        assert 4 <= saturated <= 30  # a plateau of roughly 2 to 6 px across
+        rows, cols = np.nonzero(patch == 255)
+        assert abs(cols.mean() - 6 - (gx - round(gx))) < 0.5 and abs(rows.mean() - 6 - (gy - round(gy))) < 0.5
+
+
+def test_region_of_interest_is_a_crop_of_the_full_frame(guestrin):
+    *_, outline = guestrin
+    sample = outline[2, 0, 0, 4]
+    settings = RenderSettings(sensor=Sensor().noiseless())
+    full = render_full(sample, np.random.default_rng(0), settings=settings)
+    roi = render_roi(sample, np.random.default_rng(0), settings=settings)
+    x0, y0 = roi.roi_xy
+    assert full.image.shape == (480, 640) and full.roi_xy == (0, 0)
+    np.testing.assert_allclose(roi.image, full.image[y0:y0 + 240, x0:x0 + 320], atol=1)
+    np.testing.assert_array_equal(roi.truth.pupil_centre_px, full.truth.pupil_centre_px)
+
+
+def test_roi_window_stays_on_the_sensor():
+    assert roi_window(np.array([5.0, 470.0]), (320, 240), (640, 480)) == (0, 240)
+    assert roi_window(np.array([320.0, 240.0]), (320, 240), (640, 480)) == (160, 120)
+    assert roi_window(np.array([np.nan, np.nan]), (320, 240), (640, 480)) == (160, 120)
+    with pytest.raises(ValueError, match="larger than the sensor"):
+        roi_window(np.zeros(2), (800, 240), (640, 480))
+
+
+def test_render_features_yields_every_sample_and_both_eyes_in_full_frames():
+    scene = load_scene("blignaut2014")
+    eyes = published_eyes()[:1]
+    features = simulate(eyes, scene, targets=scene.targets()[:2])
+    rng = np.random.default_rng(0)
+    rois = list(render_features(features, eyes, scene, rng))
+    assert [k for k, _ in rois] == [(0, s, 0, t) for s in range(2) for t in range(2)]
+    fulls = list(render_features(features, eyes, scene, rng, roi=None))
+    assert [k for k, _ in fulls] == [(0, 0, 0), (0, 0, 1)]
+    frame = fulls[0][1]
+    assert frame.image.shape == (1200, 1600) and frame.truth.pupil_centre_px.shape == (2, 2)
+    right, left = frame.truth.pupil_centre_px
+    assert right[0] < left[0]  # the right eye appears on the image's left
+
+
+def test_cli_render_writes_pngs_and_truth(tmp_path, capsys):
+    import cv2
+
+    from eyehil_cli import main
+
+    assert main(["render", "-o", str(tmp_path), "--count", "2"]) == 0
+    pngs = sorted(tmp_path.glob("*.png"))
+    assert len(pngs) == 2 and cv2.imread(str(pngs[0]), cv2.IMREAD_UNCHANGED).shape == (240, 320)
+    truth = json.loads((tmp_path / "truth.json").read_text())
+    assert [f["file"] for f in truth["frames"]] == [p.name for p in pngs]
+    assert "wrote" in capsys.readouterr().out
+    assert main(["render", "-o", str(tmp_path), "--roi", "big"]) == 2

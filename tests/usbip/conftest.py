@@ -1,0 +1,67 @@
+"""Fixtures of the USB/IP tests: a server with a byte collector, a host port, a raw USB/IP host; a leak check.
+
+Helpers live in `usbip_helpers` (importable from the tests, as `spherical_eye` is one level up).
+
+Every test fails if it leaves an `eyehil-usbip-*` thread alive or a socket open (counted in /proc/self/fd).
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from collections.abc import Iterator
+
+import pytest
+from usbip_helpers import Collector, RawHost
+
+from drivers.links.usbip import UsbipSerial
+from emulator.device.usbip_server import UsbipCdcServer
+
+
+def _open_sockets() -> set[str]:
+    found = set()
+    for fd in os.listdir("/proc/self/fd"):
+        try:
+            target = os.readlink(f"/proc/self/fd/{fd}")
+        except OSError:
+            continue
+        if target.startswith("socket:"):
+            found.add(f"fd {fd} -> {target}")
+    return found
+
+
+@pytest.fixture(autouse=True)
+def no_leaks() -> Iterator[None]:
+    """Fail the test if it leaves a USB/IP thread running or a socket open."""
+    linux = os.path.isdir("/proc/self/fd")
+    before = _open_sockets() if linux else set()
+    yield
+    threads = [t.name for t in threading.enumerate() if t.name.startswith("eyehil-usbip")]
+    assert not threads, f"threads left running: {threads}"
+    leaked = (_open_sockets() - before) if linux else set()
+    assert not leaked, f"sockets left open: {leaked}"
+
+
+@pytest.fixture
+def collector() -> Collector:
+    return Collector()
+
+
+@pytest.fixture
+def server(collector: Collector) -> Iterator[UsbipCdcServer]:
+    with UsbipCdcServer(collector) as srv:
+        yield srv
+
+
+@pytest.fixture
+def host(server: UsbipCdcServer) -> Iterator[UsbipSerial]:
+    port = UsbipSerial.from_url(f"usbip://127.0.0.1:{server.port}/1-1", timeout=5.0)
+    yield port
+    port.close()
+
+
+@pytest.fixture
+def raw(server: UsbipCdcServer) -> Iterator[RawHost]:
+    connection = RawHost(server.port)
+    yield connection
+    connection.close()
