@@ -116,14 +116,15 @@ def _draw_pupil(region, inner, x, y, o: EyeOutline, levels: Levels) -> None:
 
 
 def ellipse_coverage(x: np.ndarray, y: np.ndarray, centre: np.ndarray, axes: np.ndarray, angle_deg: float):
-    """Coverage (H, W) of the ellipse (centre px, full axes px, angle deg) at x (W,), y (H, 1)."""
-    c, s = np.cos(np.radians(angle_deg)), np.sin(np.radians(angle_deg))
-    dx, dy = x - centre[0], y - centre[1]
-    u, v = (dx * c + dy * s) / (axes[0] / 2), (-dx * s + dy * c) / (axes[1] / 2)
+    """Coverage (H, W) of the ellipse (centre px, full axes px, angle deg) at x (W,), y (H, 1), float32."""
+    c, s = float(np.cos(np.radians(angle_deg))), float(np.sin(np.radians(angle_deg)))
+    a, b = float(axes[0]) / 2, float(axes[1]) / 2
+    dx, dy = x - np.float32(centre[0]), y - np.float32(centre[1])
+    u, v = (dx * (c / a) + dy * (s / a)), (dy * (c / b) - dx * (s / b))
     f = np.sqrt(u * u + v * v)
-    grad = np.sqrt((u / (axes[0] / 2)) ** 2 + (v / (axes[1] / 2)) ** 2)
+    grad = np.sqrt(np.square(u / a) + np.square(v / b))
     distance = (f - 1.0) * f / np.maximum(grad, 1e-9)
-    return np.clip(0.5 - distance, 0.0, 1.0).astype(np.float32)
+    return np.clip(0.5 - distance, 0.0, 1.0, out=distance)
 
 
 def polar_coverage(x, y, centre, theta, r, dr) -> np.ndarray:

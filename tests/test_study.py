@@ -116,19 +116,13 @@ def test_replication_reproduces_the_published_structure(replication, claim: str)
 ONLY = ["H1: Q_ac the only significant parameter", "H2: Q_ac the only significant parameter"]
 
 
+@pytest.mark.xfail(strict=True, reason="known departure: lens thickness and axial length also reach p < .05 for "
+                   "H1/H2 with effects about 15x smaller than Q_ac's (published eyes: +0.007 and -0.007 vs -0.102 "
+                   "deg/SD; fresh draw: AL and Q_pc); the dominance test above holds")
 @pytest.mark.parametrize("claim", ONLY)
-def test_q_ac_is_the_only_significant_parameter_on_the_published_eyes(claim: str, request) -> None:
-    findings = _published_findings(request)
-    assert findings[claim].holds, f"{claim}: replicated {findings[claim].replicated}"
-
-
-@pytest.mark.xfail(strict=True, reason="known departure on the fresh draw (seed 2023): axial length and Q_pc also "
-                   "reach p < .05 for H1/H2 with effects about 10x smaller than Q_ac's (-0.012 and -0.009 vs -0.121 "
-                   "deg/SD); the dominance test above holds")
-@pytest.mark.parametrize("claim", ONLY)
-def test_q_ac_is_the_only_significant_parameter_on_a_fresh_draw(claim: str, request) -> None:
-    findings = _fresh_findings(request)
-    assert findings[claim].holds, f"{claim}: replicated {findings[claim].replicated}"
+def test_q_ac_is_the_only_significant_parameter(replication, claim: str) -> None:
+    f = replication[claim]
+    assert f.holds, f"{claim}: replicated {f.replicated}"
 
 
 @pytest.mark.xfail(strict=True, reason="known departure: replicated Guestrin errors are about 0.22 deg, published "

@@ -201,9 +201,12 @@ class GuestrinEstimator:
         lo, hi = np.array([self.bounds[n] for n in names]).T
         if np.any(self._residuals(x0, used, targets) == _MISSING_RESIDUAL):
             return CalibrationFailure("guestrin", "no eye reconstruction at the start parameters for some samples")
+        # diff_step: the residuals come from inner iterative solves (corneal centre) whose noise at scipy's
+        # default finite-difference step (~1.5e-8 relative) stopped fits early at non-minima; 1e-5 relative
+        # makes float32-rounded and exact features calibrate to the same parameters (1e-5 deg apart).
         sol = least_squares(
             self._residuals, np.clip(x0, lo, hi), bounds=(lo, hi), args=(used, targets), x_scale=np.ones(len(names)),
-            xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=2000,
+            xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=2000, diff_step=1e-5,
         )
         if sol.status <= 0:
             return CalibrationFailure("guestrin", f"no convergence: {sol.message}")

@@ -1,12 +1,12 @@
-"""End to end: the host calibrates gaze through the device over a pseudo-terminal and TCP, and its validation
-error equals the offline computation (the forward model's exact features, the same estimator) on the same
-eye and targets within 0.05 deg. Guestrin with 2 LEDs in guestrin2006, Blignaut with 1 LED in blignaut2014.
+"""End to end: the host calibrates gaze through the device over a pseudo-terminal, TCP and USB/IP, and its
+validation error equals the offline computation (the forward model's exact features, the same estimator) on
+the same eye and targets within 0.05 deg. Guestrin with 2 LEDs in guestrin2006, Blignaut with 1 LED in
+blignaut2014.
 
-The device's features are the exact ones rounded to float32 by the wire, and with that rounding applied
-offline the two agree to 1e-6 deg. Against unrounded features the agreement depends on the Guestrin
-estimator: its least-squares fit stops early (xtol, finite-difference Jacobian at the default step) at
-points that move with 1e-5 px perturbations, changing validation errors by 0.001-0.10 deg across the
-first 20 published eyes (eye 0: 0.002 deg, eye 17: 0.10 deg). Blignaut (linear) agrees to 2e-5 deg.
+The device's features are the exact ones rounded to float32 by the wire; with that rounding applied offline
+the two agree to 1e-6 deg. Against unrounded features they agree to about 1e-5 deg since the Guestrin fit
+uses a 1e-5 relative finite-difference step (before, its fit stopped early at points that moved with the
+rounding, by up to 0.10 deg for published eye 17, the one used here for that reason).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from emulator.forward import simulate
 from emulator.scene import HeadPose, load_scene
 from protocols import Eye
 
-EYES, EYE = "published", 0  # one of the published study's eyes
+EYES, EYE = "published", 17  # one of the published study's eyes (the most sensitive to rounding, see above)
 TOLERANCE_DEG = 0.05
 
 
@@ -52,7 +52,7 @@ def _offline(scene_name: str, method: str, plan: Plan, quantise: bool) -> np.nda
     return validation_errors_deg(geometry, fit.estimate(_subset(samples, slice(k, None))), plan.validation_mm)
 
 
-@pytest.mark.parametrize("backend", ["pty", "tcp"])
+@pytest.mark.parametrize("backend", ["pty", "tcp", "usbip"])
 @pytest.mark.parametrize("scene_name, method", [("guestrin2006", "guestrin"), ("blignaut2014", "blignaut")])
 def test_calibration_through_the_device_matches_offline(tmp_path, backend: str, scene_name: str, method: str) -> None:
     geometry = load_geometry(write_geometry(load_scene(scene_name), tmp_path / "geometry.toml")).geometry
