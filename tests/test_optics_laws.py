@@ -134,3 +134,16 @@ def test_ellipse_fit_with_too_few_points_is_invalid() -> None:
     pts = np.array([[[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0], [2.0, 2.0]]])
     e = fit_ellipse(pts, np.array([[1, 1, 1, 1, 0]]))
     assert not e.valid[0]
+
+
+def test_near_and_far_roots_of_a_chord_through_the_cap() -> None:
+    """A ray along +x at depth w = 1 below the apex of a sphere (R 5) crosses the cap at x = -+3 (r^2 = 2Rw - w^2)."""
+    cap = Conic(0.0, 5.0, 0.0, 5.0)
+    origin, direction = np.array([-10.0, 0.0, -1.0]), np.array([1.0, 0.0, 0.0])
+    t_near, ok_near = cap.intersect(origin, direction)
+    t_far, ok_far = cap.intersect(origin, direction, far=True)
+    assert ok_near and ok_far
+    assert t_near == pytest.approx(7.0, abs=1e-12) and t_far == pytest.approx(13.0, abs=1e-12)
+    deeper = np.array([-10.0, 0.0, -6.0])  # below the equator (w > R): the back half is not optical surface
+    _, ok = cap.intersect(deeper, direction)
+    assert not ok
