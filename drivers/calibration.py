@@ -3,7 +3,9 @@
 For each target the host shows it (on the emulator: the STIMULUS side channel, `Tracker.stimulus`),
 discards the samples of the first `settle_s` after the device acknowledged it (the subject's latency
 and saccade), and averages the usable samples of the next `collect_s` (device time) into one fixation.
-Calibration targets come first, then validation targets. Methods:
+Calibration targets come first, then validation targets. The samples come either from the device's
+FEATURES (`frames=False`) or, in frames-only mode (`frames=True`), from its camera images: the host
+detects pupil and glints itself (`drivers.frames.FrameReader`, LEDs matched with the geometry's). Methods:
 
 - ``guestrin``: Guestrin & Eizenman 2006, model-based (`drivers.gaze.guestrin`), one eye, the LEDs of
   the geometry file (two);
@@ -26,12 +28,13 @@ import numpy as np
 from drivers.client import Tracker
 from drivers.errors import CalibrationError
 from drivers.features import binocular_samples, eye_samples, fixation_mean
+from drivers.frames import FrameReader, reader_for
 from drivers.gaze.base import BinocularSamples, Calibration, EyeSamples, angular_error_deg
 from drivers.gaze.blignaut import BlignautEstimator
 from drivers.gaze.geometry import Screen, TrackerGeometry
 from drivers.gaze.guestrin import GuestrinEstimator
 from drivers.wire import Sample
-from protocols.enums import Capability, Eye, EyeSelect
+from protocols.enums import Capability, Eye, EyeSelect, StreamSelect
 
 METHODS = ("guestrin", "blignaut")
 
@@ -86,13 +89,16 @@ class Result:
         return float(np.nanmean(self.errors_deg))
 
 
-def collect_fixation(tracker: Tracker, target_id: int, xy_mm: np.ndarray, screen: Screen, plan: Plan) -> list[Sample]:
-    """Show one target; return the samples of its collection window (device time)."""
+def collect_fixation(tracker: Tracker, target_id: int, xy_mm: np.ndarray, screen: Screen, plan: Plan,
+                     reader: Tracker | FrameReader | None = None) -> list[Sample]:
+    """Show one target; return the samples (from `reader`, default the tracker) of its collection window."""
     x, y = screen_to_stimulus(screen, xy_mm)
     onset = tracker.stimulus(target_id, float(x), float(y))
     start, end = onset + round(plan.settle_s * 1e6), onset + round((plan.settle_s + plan.collect_s) * 1e6)
+    if isinstance(reader, FrameReader):
+        reader.detect_from_us = start  # the samples before are discarded: no need to detect them
     window: list[Sample] = []
-    for sample in tracker.samples():
+    for sample in (reader or tracker).samples():
         if sample.device_us >= end:
             return window
         if sample.device_us >= start:
@@ -128,30 +134,36 @@ def estimator_for(method: str, geometry: TrackerGeometry, eye: Eye, model: int):
     raise ValueError(f"method must be one of {METHODS}, got {method!r}")
 
 
-def configure_for(tracker: Tracker, method: str, geometry: TrackerGeometry, eye: Eye, rate_hz: int | None) -> int:
-    """CONFIGURE the stream a method needs (guestrin: the geometry's LEDs; blignaut: LED 0, both eyes);
-    return the number of glints per eye."""
+def configure_for(tracker: Tracker, method: str, geometry: TrackerGeometry, eye: Eye, rate_hz: int | None,
+                  frames: bool = False) -> int:
+    """CONFIGURE the stream a method needs (guestrin: the geometry's LEDs; blignaut: LED 0, both eyes), FEATURES
+    or, with `frames`, FRAMES only; return the number of glints per eye."""
     info = tracker.info
+    if frames and Capability.FRAMES not in info.capabilities:
+        raise CalibrationError("frames-only calibration needs a device that streams frames")
     if method == "blignaut" and Capability.BINOCULAR not in info.capabilities:
         raise CalibrationError("blignaut needs both eyes: the device is not binocular")
     if method == "guestrin" and geometry.n_leds > info.led_count:
         raise CalibrationError(f"the geometry has {geometry.n_leds} LEDs, the device {info.led_count}")
     leds = geometry.n_leds if method == "guestrin" else 1
     eyes = EyeSelect.BOTH if method == "blignaut" else EyeSelect(1 << eye)
-    tracker.configure(leds=leds, rate_hz=rate_hz, eyes=eyes)
+    stream = StreamSelect.FRAMES if frames else StreamSelect.FEATURES
+    tracker.configure(leds=leds, rate_hz=rate_hz, eyes=eyes, stream=stream)
     return leds
 
 
 def calibrate(tracker: Tracker, geometry: TrackerGeometry, method: str, plan: Plan | None = None, *,
-              eye: Eye = Eye.RIGHT, model: int = 3, rate_hz: int | None = None) -> Result:
-    """Configure, stream, run `plan`'s targets, fit on the calibration ones, validate on the others; stop."""
+              eye: Eye = Eye.RIGHT, model: int = 3, rate_hz: int | None = None, frames: bool = False) -> Result:
+    """Configure, stream, run `plan`'s targets, fit on the calibration ones, validate on the others; stop.
+    With `frames`, the device streams images only and the host detects the features (frames-only mode)."""
     plan = plan or Plan.default(geometry.screen)
     estimator = estimator_for(method, geometry, eye, model)
-    n_leds = configure_for(tracker, method, geometry, eye, rate_hz)
+    n_leds = configure_for(tracker, method, geometry, eye, rate_hz, frames)
     targets = np.concatenate([plan.calibration_mm, plan.validation_mm])
+    reader = reader_for(tracker, frames, geometry.leds[:, :2])
     tracker.start()
     try:
-        fixations = [collect_fixation(tracker, i, xy, geometry.screen, plan) for i, xy in enumerate(targets)]
+        fixations = [collect_fixation(tracker, i, xy, geometry.screen, plan, reader) for i, xy in enumerate(targets)]
     finally:
         tracker.stop()
     samples = fixation_samples(fixations, method, eye, n_leds)
@@ -164,10 +176,11 @@ def calibrate(tracker: Tracker, geometry: TrackerGeometry, method: str, plan: Pl
     return Result(method, fit, plan, estimates, errors, fixations)
 
 
-def gaze(tracker: Tracker, result: Result, eye: Eye = Eye.RIGHT, count: int | None = None
-         ) -> Iterator[tuple[Sample, np.ndarray]]:
-    """Stream (sample, gaze (2,) screen mm; NaN when unusable) with the calibration of `result` (call start first)."""
-    for sample in tracker.samples(count=count):
+def gaze(tracker: Tracker, result: Result, eye: Eye = Eye.RIGHT, count: int | None = None,
+         reader: FrameReader | None = None) -> Iterator[tuple[Sample, np.ndarray]]:
+    """Stream (sample, gaze (2,) screen mm; NaN when unusable) with the calibration of `result` (call start first);
+    samples from `reader` (frames-only mode) or the tracker's FEATURES."""
+    for sample in (reader or tracker).samples(count=count):
         one = [sample]
         samples = eye_samples(one, eye) if result.method == "guestrin" else binocular_samples(one)
         yield sample, result.calibration.estimate(samples)[0]

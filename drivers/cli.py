@@ -5,7 +5,8 @@ in-process emulator), spy://<URL> (hex dump), usbip://host:port (see `drivers.li
 
     eyehil info /dev/pts/5
     eyehil stream socket://127.0.0.1:5555 --rate 500 --duration 2
-    eyehil calibrate /dev/pts/5 --method guestrin --geometry guestrin2006.toml
+    eyehil stream /dev/pts/5 --frames --save frames/     # frames only: the host detects; PNGs of the printed ones
+    eyehil calibrate /dev/pts/5 --method guestrin --geometry guestrin2006.toml [--frames]
     eyehil record /dev/pts/5 -o run.jsonl --duration 10 --targets 3x3 --geometry guestrin2006.toml
 """
 
@@ -16,15 +17,18 @@ import functools
 import sys
 from collections.abc import Callable
 from dataclasses import asdict
+from pathlib import Path
 
+import cv2
 import numpy as np
 
 from drivers.calibration import METHODS, Plan, calibrate, gaze, grid, screen_to_stimulus
 from drivers.client import Tracker, open_tracker
 from drivers.errors import TrackerError
+from drivers.frames import FrameReader, reader_for
 from drivers.recording import Recorder
 from drivers.setup_file import load_geometry
-from protocols.enums import Eye, EyeSelect
+from protocols.enums import Eye, EyeSelect, StreamSelect
 
 EYES = {"right": EyeSelect.RIGHT, "left": EyeSelect.LEFT, "both": EyeSelect.BOTH}
 
@@ -52,6 +56,9 @@ def register_info(sub: argparse._SubParsersAction) -> None:
 def register_stream(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("stream", parents=[_common(), _stream_options()], help="stream samples and print them")
     p.add_argument("--every", type=int, default=0, help="print every Nth sample (default: about 10 per second)")
+    p.add_argument("--frames", action="store_true", help="stream camera images only; the host detects the features")
+    p.add_argument("--save", metavar="DIR", help="with --frames: write the printed samples' images as PNG files")
+    p.add_argument("--geometry", help="with --frames: the geometry file, to match glints to LEDs by position")
     p.set_defaults(func=run_stream)
 
 
@@ -64,6 +71,7 @@ def register_calibrate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--settle", type=float, default=0.5, help="s discarded after each target appears (default 0.5)")
     p.add_argument("--collect", type=float, default=0.2, help="s averaged per target (default 0.2)")
     p.add_argument("--gaze-seconds", type=float, default=1.0, help="then stream gaze this long (default 1)")
+    p.add_argument("--frames", action="store_true", help="stream camera images only; the host detects the features")
     p.set_defaults(func=run_calibrate)
 
 
@@ -111,9 +119,15 @@ def run_info(args: argparse.Namespace) -> int:
     return 0
 
 
-def _start(tracker: Tracker, args: argparse.Namespace) -> None:
-    tracker.configure(rate_hz=args.rate, eyes=EYES[args.eyes] if args.eyes else None)
+def _start(tracker: Tracker, args: argparse.Namespace) -> Tracker | FrameReader:
+    """CONFIGURE and START; return what to read samples from (the tracker, or a FrameReader with --frames)."""
+    frames = getattr(args, "frames", False)
+    tracker.configure(rate_hz=args.rate, eyes=EYES[args.eyes] if args.eyes else None,
+                      stream=StreamSelect.FRAMES if frames else StreamSelect.FEATURES)
+    geometry = getattr(args, "geometry", None) if frames else None
+    reader = reader_for(tracker, frames, load_geometry(geometry).geometry.leds[:, :2] if geometry else None)
     tracker.start()
+    return reader
 
 
 def _describe(sample) -> str:
@@ -128,13 +142,14 @@ def _describe(sample) -> str:
 @_reported
 def run_stream(args: argparse.Namespace) -> int:
     with _open(args) as tracker:
-        _start(tracker, args)
+        reader = _start(tracker, args)
         every = args.every or max(1, tracker.info.sample_rate_hz // 10)
         start, n = None, 0
-        for sample in tracker.samples():
+        for sample in reader.samples():
             start = sample.device_us if start is None else start
             if n % every == 0:
                 print(_describe(sample))
+                _save(reader, args.save)
             n += 1
             if sample.device_us - start >= args.duration * 1e6:
                 break
@@ -144,29 +159,41 @@ def run_stream(args: argparse.Namespace) -> int:
     return 0
 
 
+def _save(reader: Tracker | FrameReader, directory: str | None) -> None:
+    """Write the images of the reader's last sample as DIR/frame_<frame id>_<eye>.png."""
+    if not directory or not isinstance(reader, FrameReader):
+        return
+    Path(directory).mkdir(parents=True, exist_ok=True)
+    for got in reader.last_images:
+        name = f"frame_{got.image.frame_id:010d}_{Eye(got.image.eye).name.lower()}.png"
+        cv2.imwrite(str(Path(directory) / name), got.image.pixels)
+
+
 @_reported
 def run_calibrate(args: argparse.Namespace) -> int:
     geometry = load_geometry(args.geometry).geometry
     with _open(args) as tracker:
         plan = Plan.default(geometry.screen, settle_s=args.settle, collect_s=args.collect)
-        result = calibrate(tracker, geometry, args.method, plan, model=args.model, rate_hz=args.rate)
+        result = calibrate(tracker, geometry, args.method, plan, model=args.model, rate_hz=args.rate,
+                           frames=args.frames)
         print(f"{args.method}: calibrated on {len(plan.calibration_mm)} targets; parameters "
               f"{ {k: v for k, v in result.calibration.params.items() if k != 'coefficients'} }")
         for target, est, err in zip(plan.validation_mm, result.estimates_mm, result.errors_deg, strict=True):
             print(f"  validation target ({target[0]:+7.1f}, {target[1]:+7.1f}) mm -> ({est[0]:+7.1f}, {est[1]:+7.1f})"
                   f" mm, error {err:.3f} deg")
         print(f"  mean validation error {result.mean_error_deg:.3f} deg")
-        _stream_gaze(tracker, result, args.gaze_seconds)
+        _stream_gaze(tracker, result, args.gaze_seconds, reader_for(tracker, args.frames, geometry.leds[:, :2]))
     return 0
 
 
-def _stream_gaze(tracker: Tracker, result, seconds: float) -> None:
-    """Stream gaze for `seconds` of device time, printing about ten estimates per second."""
+def _stream_gaze(tracker: Tracker, result, seconds: float, reader: Tracker | FrameReader) -> None:
+    """Stream gaze for `seconds` of device time (samples from `reader`), printing about ten estimates per second."""
     if seconds <= 0:
         return
     tracker.start()
     every, start = max(1, tracker.info.sample_rate_hz // 10), None
-    for i, (sample, xy) in enumerate(gaze(tracker, result)):
+    frames = reader if isinstance(reader, FrameReader) else None
+    for i, (sample, xy) in enumerate(gaze(tracker, result, reader=frames)):
         start = sample.device_us if start is None else start
         if i % every == 0:
             print(f"  gaze t={sample.device_us / 1e6:.3f}s ({xy[0]:+7.1f}, {xy[1]:+7.1f}) mm")

@@ -3,7 +3,8 @@
 `Wire` owns one SerialLike (`drivers.links`) and a `protocols.NativeReceiver`. `pump(wait_s)` reads
 whatever arrives within `wait_s` seconds (waiting with select() on the link's descriptor when it has
 one, else with the link's own read timeout), decodes it, and sorts it: FEATURES become `Sample`s in
-`samples`, every other message goes to `replies` with its arrival time. Faults are counted, never
+`samples`, FRAME_CHUNKs are reassembled (`protocols.images.ImageAssembler`) into `ReceivedImage`s in
+`images`, every other message goes to `replies` with its arrival time. Faults are counted, never
 raised (`HostStats`); only a failing link raises (`LinkError`). Host times are microseconds of
 ``time.monotonic_ns()``.
 """
@@ -16,14 +17,16 @@ from collections import deque
 from dataclasses import dataclass, fields
 
 from drivers.errors import LinkError
-from protocols.header import SEQ_MODULUS, seq_gap
+from protocols.header import SEQ_MODULUS, Header, seq_gap
+from protocols.images import Image, ImageAssembler
 from protocols.native import DEVICE_TYPES, Message, encode
 from protocols.replies import ErrorReply
-from protocols.samples import EyeFeatures, Features
+from protocols.samples import EyeFeatures, Features, FrameChunk
 from protocols.stream import NativeReceiver, Received
 
 CHUNK = 65536
 MAX_BUFFERED_SAMPLES = 200_000
+MAX_BUFFERED_IMAGES = 256
 
 
 def host_now_us() -> int:
@@ -50,6 +53,17 @@ class Sample:
     def eye(self, which: int) -> EyeFeatures | None:
         """The record of eye `which` (protocols.Eye), or None if the stream does not carry it."""
         return next((e for e in self.eyes if e.eye == which), None)
+
+
+@dataclass(frozen=True, slots=True)
+class ReceivedImage:
+    """A reassembled camera image, the exposure's device time (mid-exposure, us), when its last chunk arrived
+    (host us) and that chunk's sequence number."""
+
+    image: Image
+    device_us: int
+    host_us: int
+    seq: int
 
 
 @dataclass(frozen=True, slots=True)
@@ -83,6 +97,10 @@ class HostStats:
     retries: int = 0  # commands re-sent after a missing response
     stale_replies: int = 0  # replies that matched no outstanding command
     samples_overflowed: int = 0  # samples discarded because nobody read them
+    chunks: int = 0  # FRAME_CHUNKs received
+    images: int = 0  # images reassembled whole
+    images_incomplete: int = 0  # images abandoned with chunks missing, or with inconsistent chunks
+    images_overflowed: int = 0  # images discarded because nobody read them
 
     def as_dict(self) -> dict[str, int]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -97,6 +115,8 @@ class Wire:
         self.receiver = NativeReceiver(accept=DEVICE_TYPES)
         self.samples: deque[Sample] = deque()
         self.replies: deque[Reply] = deque()
+        self.images: deque[ReceivedImage] = deque()
+        self.assembler = ImageAssembler()
         self.stats = HostStats()
         self.seq = seq0 % SEQ_MODULUS
         self._last_frame_id: int | None = None
@@ -155,6 +175,9 @@ class Wire:
 
     def _dispatch(self, event: Received, now: int) -> None:
         message = event.message
+        if isinstance(message, FrameChunk):
+            self._chunk(message, event.header, now)
+            return
         if not isinstance(message, Features):
             self.stats.errors_received += isinstance(message, ErrorReply)
             self.replies.append(Reply(event, now))
@@ -171,6 +194,19 @@ class Wire:
         h = event.header
         self.samples.append(Sample(h.seq, message.frame_id, h.timestamp_us, now, message.eyes, event.lost_before,
                                    skipped))
+
+    def _chunk(self, chunk: FrameChunk, header: Header, now: int) -> None:
+        """Add a chunk to its image; keep the image when it is whole."""
+        self.stats.chunks += 1
+        image = self.assembler.add(chunk)
+        self.stats.images_incomplete = self.assembler.incomplete + self.assembler.inconsistent
+        if image is None:
+            return
+        self.stats.images += 1
+        if len(self.images) >= MAX_BUFFERED_IMAGES:
+            self.images.popleft()
+            self.stats.images_overflowed += 1
+        self.images.append(ReceivedImage(image, header.timestamp_us, now, header.seq))
 
     def _sync_counters(self) -> None:
         c = self.receiver.counters

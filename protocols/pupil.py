@@ -9,7 +9,9 @@ frame.
 
 Pupil Remote (REQ/REP) requests, checked in this order: any multipart message (forwarded to the
 backbone, reply ``Message forwarded.``), ``SUB_PORT``, ``PUB_PORT``, ``R [name]``, ``r``, ``C``,
-``c``, ``T <float>``, ``t``, ``v``, anything else (``Unknown command.``).
+``c``, ``T <float>``, ``t``, ``v``, anything else (``Unknown command.``). The replies are the constants
+``REPLY_*``; a request that is not UTF-8 gets ``Unknown command.``; a multipart request that fails `unpack`
+gets ``Malformed message: <reason>`` and is not forwarded (Pupil Capture would forward it blindly).
 
 Datums (image pixels with the origin at the top-left; Pupil's eye ids: 0 right, 1 left):
 ``pupil.<id>.2d`` {topic, id, method "2d c++", norm_pos (x / w, 1 - y / h), diameter (px, the major
@@ -22,6 +24,7 @@ base_data}.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -34,23 +37,38 @@ MAX_DEPTH = 32
 VERSION = "3.6.0"
 
 RAW = "__raw_data__"
+FRAME_FORMATS = ("gray", "bgr", "jpeg")
+#: At most this many reference data per `calibration.add_ref_data` notification.
+MAX_REF_DATA = 100_000
+
+REPLY_FORWARDED = "Message forwarded."
+REPLY_OK = "OK"
+REPLY_TIMESYNC = "Timesync successful."
+REPLY_UNKNOWN = "Unknown command."
+REPLY_MALFORMED = "Malformed message: "
 
 
 class PupilMessageError(ValueError):
     """A message that cannot be packed or unpacked (the reason is the message)."""
 
 
+_SCALARS = frozenset({str, int, float, bool, bytes, type(None)})
+
+
 def _check_keys(value: Any, depth: int = 0) -> None:
+    """PupilMessageError unless every map key in `value` is a string and containers nest at most `MAX_DEPTH`."""
     if depth > MAX_DEPTH:
         raise PupilMessageError(f"payload nested deeper than {MAX_DEPTH} levels")
-    if isinstance(value, Mapping):
+    if isinstance(value, dict | Mapping):
         for key, item in value.items():
             if not isinstance(key, str):
                 raise PupilMessageError(f"payload map key {key!r} is not a string")
-            _check_keys(item, depth + 1)
+            if type(item) not in _SCALARS:
+                _check_keys(item, depth + 1)
     elif isinstance(value, list | tuple):
         for item in value:
-            _check_keys(item, depth + 1)
+            if type(item) not in _SCALARS:
+                _check_keys(item, depth + 1)
 
 
 def pack(payload: Mapping[str, Any]) -> list[bytes]:
@@ -114,9 +132,10 @@ def parse_request(frames: Sequence[bytes]) -> Request:
         return Request("record_start", text[2:] or None)
     if text.startswith("T "):
         try:
-            return Request("time_sync", float(text[2:]))
+            value = float(text[2:])
         except ValueError:
             return Request("unknown", text)
+        return Request("time_sync", value) if math.isfinite(value) else Request("unknown", text)
     return Request("unknown", text)
 
 
@@ -159,3 +178,64 @@ def gaze_datum(eye_ids: Sequence[int], timestamp: float, norm_pos: Sequence[floa
     ids = "".join(str(i) for i in sorted(eye_ids))
     return {"topic": f"gaze.2d.{ids}.", "norm_pos": [float(norm_pos[0]), float(norm_pos[1])],
             "confidence": float(confidence), "timestamp": float(timestamp), "base_data": base_data}
+
+
+def glint_entry(led: int, centre: Sequence[float], valid: bool) -> dict[str, Any]:
+    """One glint of a `pupil.<id>.2d` or `glint.<id>` datum: {center [x, y] px (eye image), led, valid}."""
+    return {"center": [float(centre[0]), float(centre[1])], "led": int(led), "valid": bool(valid)}
+
+
+@dataclass(frozen=True)
+class RefDatum:
+    """One calibration reference datum: where the target was (`norm_pos`, screen, origin bottom-left) when."""
+
+    norm_pos: tuple[float, float]
+    timestamp: float  # s, Pupil time
+
+
+def _finite_pair(value: Any) -> tuple[float, float] | None:
+    if not isinstance(value, list | tuple) or len(value) != 2:
+        return None
+    if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
+        return None
+    pair = (float(value[0]), float(value[1]))
+    return pair if all(math.isfinite(v) for v in pair) else None
+
+
+def parse_ref_data(payload: Mapping[str, Any]) -> tuple[list[RefDatum], int]:
+    """The usable entries of a `calibration.add_ref_data` payload {ref_data: [{norm_pos, timestamp}, ...]},
+    sorted by time, and how many entries were refused (not a map, no finite norm_pos pair or timestamp,
+    or beyond `MAX_REF_DATA`)."""
+    entries = payload.get("ref_data")
+    if not isinstance(entries, list):
+        return [], 1
+    good: list[RefDatum] = []
+    for entry in entries[:MAX_REF_DATA]:
+        pos = _finite_pair(entry.get("norm_pos")) if isinstance(entry, dict) else None
+        ts = entry.get("timestamp") if isinstance(entry, dict) else None
+        if pos is not None and isinstance(ts, int | float) and not isinstance(ts, bool) and math.isfinite(ts):
+            good.append(RefDatum(pos, float(ts)))
+    return sorted(good, key=lambda r: r.timestamp), len(entries) - len(good)
+
+
+def norm_pos_of(payload: Mapping[str, Any]) -> tuple[float, float] | None:
+    """The finite `norm_pos` pair of a payload, or None."""
+    return _finite_pair(payload.get("norm_pos"))
+
+
+def plain(value: Any, depth: int = 0) -> Any:
+    """`value` with numpy arrays and scalars, tuples and other sequences made msgpack-ready lists and floats;
+    map keys become strings (a calibration's parameters, for `calibration.result.v2`)."""
+    if depth > MAX_DEPTH:
+        raise PupilMessageError(f"value nested deeper than {MAX_DEPTH} levels")
+    if isinstance(value, Mapping):
+        return {str(k): plain(v, depth + 1) for k, v in value.items()}
+    if isinstance(value, str | bytes | bool | None):
+        return value
+    if hasattr(value, "tolist"):  # numpy arrays and scalars
+        return plain(value.tolist(), depth + 1)
+    if isinstance(value, list | tuple):
+        return [plain(v, depth + 1) for v in value]
+    if isinstance(value, int | float):
+        return value
+    return str(value)

@@ -3,15 +3,27 @@
 from __future__ import annotations
 
 import msgpack
+import numpy as np
 import pytest
 
 from protocols.pupil import (
+    FRAME_FORMATS,
+    MAX_REF_DATA,
+    REPLY_FORWARDED,
+    REPLY_OK,
+    REPLY_TIMESYNC,
+    REPLY_UNKNOWN,
     PupilMessageError,
+    RefDatum,
     frame_datum,
     gaze_datum,
+    glint_entry,
+    norm_pos_of,
     notification,
     pack,
+    parse_ref_data,
     parse_request,
+    plain,
     pupil_datum,
     unpack,
 )
@@ -84,3 +96,34 @@ def test_datums_follow_pupil_conventions() -> None:
     assert gaze_datum([1, 0], 1.0, (0.5, 0.5), 1.0, [])["topic"] == "gaze.2d.01."
     with pytest.raises(PupilMessageError, match="format"):
         frame_datum(0, 0, 0.0, 1, 1, "png", b"x")
+
+
+@pytest.mark.parametrize("text", [b"T nan", b"T inf", b"T -inf", b"T ", b"T 1e999"])
+def test_time_sync_needs_a_finite_float(text: bytes) -> None:
+    assert parse_request([text]).kind == "unknown"
+
+
+def test_reference_data_parsing() -> None:
+    payload = {"ref_data": [{"norm_pos": [0.5, 0.25], "timestamp": 2.0}, {"norm_pos": (0, 1), "timestamp": 1},
+                            {"norm_pos": [0.5], "timestamp": 1.0}, {"norm_pos": [True, 0.5], "timestamp": 1.0},
+                            {"norm_pos": [0.1, float("nan")], "timestamp": 1.0},
+                            {"norm_pos": [0.1, 0.2], "timestamp": "now"}, "junk", {"timestamp": 3.0}]}
+    refs, refused = parse_ref_data(payload)
+    assert refs == [RefDatum((0.0, 1.0), 1.0), RefDatum((0.5, 0.25), 2.0)] and refused == 6
+    assert parse_ref_data({"ref_data": "x"}) == ([], 1)
+    assert parse_ref_data({"ref_data": [{"norm_pos": [0, 0], "timestamp": 0}] * (MAX_REF_DATA + 5)})[1] == 5
+    assert norm_pos_of({"norm_pos": [1, 2]}) == (1.0, 2.0) and norm_pos_of({"norm_pos": "x"}) is None
+
+
+def test_plain_makes_parameters_packable() -> None:
+    value = plain({"a": np.arange(3), "b": (np.float64(1.5), {"c": np.bool_(True)}), 3: None, "d": object})
+    assert value["a"] == [0, 1, 2] and value["b"] == [1.5, {"c": True}] and value["3"] is None
+    assert isinstance(value["d"], str)
+    assert unpack(pack({"topic": "x", "params": value}))[1]["params"]["a"] == [0, 1, 2]
+
+
+def test_glint_entries_and_replies() -> None:
+    assert glint_entry(1, np.array([1.5, 2.0]), np.True_) == {"center": [1.5, 2.0], "led": 1, "valid": True}
+    assert (REPLY_FORWARDED, REPLY_TIMESYNC, REPLY_UNKNOWN, REPLY_OK) == (
+        "Message forwarded.", "Timesync successful.", "Unknown command.", "OK")
+    assert FRAME_FORMATS == ("gray", "bgr", "jpeg")

@@ -4,7 +4,9 @@
 overrides the eyes), the eye anatomy (an `emulator.eye.select` spec and an index into it), the head
 pose, the behaviour, the script (`"stimulus"`: follow the host's STIMULUS messages; `"demo"`: loop over
 the scene's targets with saccades, a pursuit and blinks), the mode (native or ISCAN), the default rate
-and the clock.
+and the clock. A native device also streams frames (`frame_stream`): its subject's solver carries the
+appearance channels (`appearance.AppearanceSolver`), and the image noise comes from generators seeded
+with `seed`, the frame id and the eye (`frames.exposure_rng`).
 
 URL form (loop://, and `--option` values): ``scene=blignaut2014&eyes=published&eye=3&clock=fast&rate=500``.
 """
@@ -16,7 +18,9 @@ from urllib.parse import parse_qsl
 
 import numpy as np
 
+from emulator.device.appearance import AppearanceSolver
 from emulator.device.clock import make_clock
+from emulator.device.frame_stream import FrameOptions
 from emulator.device.gaze import Blink, Fixation, Pursuit, Segment
 from emulator.device.iscan import IscanTracker
 from emulator.device.solver import FeatureSolver, tracked_scene
@@ -68,15 +72,16 @@ def demo_script(scene: Scene) -> list[Segment]:
     return script
 
 
-def build_subject(options: DeviceOptions) -> Subject:
-    """The simulated subject of `options`."""
+def build_subject(options: DeviceOptions, appearance: bool = True) -> Subject:
+    """The simulated subject of `options`; with `appearance`, its observations also carry what frames are drawn
+    from (`appearance.AppearanceSolver`)."""
     scene = load_scene(options.scene)
     if options.sides:
         scene = tracked_scene(scene, ("right", "left") if options.sides == "both" else (options.sides,))
     eyes, _ = eyes_from_spec(options.eyes, options.seed)
     if not 0 <= options.eye < len(eyes):
         raise ValueError(f"eye {options.eye} out of range: the spec {options.eyes!r} gives {len(eyes)} eye(s)")
-    solver = FeatureSolver(eyes[options.eye], scene, options.head)
+    solver = (AppearanceSolver if appearance else FeatureSolver)(eyes[options.eye], scene, options.head)
     script = demo_script(scene) if options.script == "demo" else None
     return Subject(solver, options.behaviour, rng=np.random.default_rng(options.seed), script=script)
 
@@ -85,10 +90,10 @@ def build_device(options: DeviceOptions | None = None) -> VirtualTracker | Iscan
     """A device core (native `VirtualTracker` or `IscanTracker`) as `options` say."""
     options = options or DeviceOptions()
     clock = make_clock(options.clock, options.speed)
-    subject = build_subject(options)
+    subject = build_subject(options, appearance=options.mode == "native")
     if options.mode == "iscan":
         return IscanTracker(subject, clock, rate_hz=options.rate_hz)
-    return VirtualTracker(subject, clock, default_rate_hz=options.rate_hz)
+    return VirtualTracker(subject, clock, default_rate_hz=options.rate_hz, frames=FrameOptions(seed=options.seed))
 
 
 _HEAD_KEYS = ("x", "y", "z", "yaw", "pitch", "roll")

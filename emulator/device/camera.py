@@ -38,10 +38,14 @@ class Selection:
 
 @dataclass(frozen=True)
 class Exposures:
-    """Consecutive exposures: detected features and mid-exposure times (N,) us."""
+    """Consecutive exposures: detected features, mid-exposure times (N,) us, and what the subject showed the
+    camera: its channels (N, E', C) for the tracked eyes (`Subject.observe`; what frames are drawn from) and
+    whether its eyes were closed (N,)."""
 
     batch: FeaturesBatch
     time_us: np.ndarray
+    values: np.ndarray
+    blink: np.ndarray
 
     def __len__(self) -> int:
         return len(self.time_us)
@@ -49,7 +53,7 @@ class Exposures:
     def __getitem__(self, s: slice) -> Exposures:
         """The exposures in slice `s` (the eye ids are shared)."""
         per_sample = {f.name: getattr(self.batch, f.name)[s] for f in fields(self.batch) if f.name != "eye"}
-        return Exposures(replace(self.batch, **per_sample), self.time_us[s])
+        return Exposures(replace(self.batch, **per_sample), self.time_us[s], self.values[s], self.blink[s])
 
 
 def _inside(xy: np.ndarray, region: tuple[int, int, int, int]) -> np.ndarray:
@@ -165,7 +169,7 @@ class Camera:
             frame_id=((first + np.arange(count)) % (1 << 32)).astype(np.uint32), eye=np.array(self._sel.eyes),
             glint_led=np.broadcast_to(np.arange(self._sel.leds), (count, len(self._sel.eyes), self._sel.leds)),
             **fields_)
-        new = Exposures(batch, times)
+        new = Exposures(batch, times, obs.values, obs.blink)
         self._ready = new if self._ready is None else _concat(self._ready, new)
 
 
@@ -173,4 +177,5 @@ def _concat(a: Exposures, b: Exposures) -> Exposures:
     """Exposures a then b (same eyes)."""
     joined = {f.name: np.concatenate([getattr(a.batch, f.name), getattr(b.batch, f.name)])
               for f in fields(a.batch) if f.name != "eye"}
-    return Exposures(replace(a.batch, **joined), np.concatenate([a.time_us, b.time_us]))
+    return Exposures(replace(a.batch, **joined), *(np.concatenate([getattr(a, k), getattr(b, k)])
+                                                    for k in ("time_us", "values", "blink")))

@@ -3,6 +3,7 @@
     eyehil emulate --link pty                       # prints the pseudo-terminal's path; open it as a serial port
     eyehil emulate --link tcp --port 5555           # pyserial socket://127.0.0.1:5555
     eyehil emulate --link pty --mode iscan --rate 120
+    eyehil emulate --link zmq [--port 50020] [--lsl]   # Pupil Core Network API (+ an LSL outlet), docs/zmq.md
     eyehil emulate --scene blignaut2014 --write-geometry blignaut.toml   # the host's setup file
 
 It prints a line ``url: <what a host opens>`` once the link is up. The simulated subject follows the host's
@@ -32,7 +33,7 @@ LINKS: dict[str, str] = {
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("emulate", help="run a virtual eye tracker on a pseudo-terminal, TCP or USB/IP link",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--link", choices=sorted(LINKS), default="pty", help="transport (default pty)")
+    p.add_argument("--link", choices=sorted([*LINKS, "zmq"]), default="pty", help="transport (default pty)")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (tcp, usbip; default 127.0.0.1)")
     p.add_argument("--port", type=int, default=0, help="port (tcp default: any free port; usbip default 3240)")
     p.add_argument("--scene", default="guestrin2006", help=f"preset ({', '.join(preset_names())}) or TOML path")
@@ -48,6 +49,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--speed", type=float, default=1.0, help="real clock: device seconds per wall second")
     p.add_argument("--behaviour", default="", help="e.g. 'latency=0.2,jitter=0.05,blinks=0.3' (s, deg, Hz)")
     p.add_argument("--write-geometry", metavar="FILE", help="write the host's tracker geometry (TOML) for the scene")
+    p.add_argument("--lsl", action="store_true", help="zmq: also open an LSL outlet of type Gaze (needs pylsl)")
     p.add_argument("--duration", type=float, help="stop after this many seconds (default: until interrupted)")
     p.set_defaults(func=run)
 
@@ -73,6 +75,17 @@ def make_link(kind: str, host: str, port: int):
     return factory(host=host, port=port or (3240 if kind == "usbip" else 0))
 
 
+def make_runner(opts: DeviceOptions, args: argparse.Namespace):
+    """A `LinkRunner` on the chosen link or, for ``--link zmq``, the Pupil Core facade (imported only then)."""
+    if args.link == "zmq":
+        from emulator.device.zmq_server import server_for
+
+        return server_for(opts, args.host, args.port or 50020, lsl=args.lsl)
+    if args.lsl:
+        raise ValueError("--lsl needs --link zmq")
+    return LinkRunner(build_device(opts), make_link(args.link, args.host, args.port))
+
+
 def run(args: argparse.Namespace) -> int:
     opts = options(args)
     if args.write_geometry:
@@ -83,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())  # SIGTERM stops cleanly, like Ctrl-C
     try:
-        with LinkRunner(build_device(opts), make_link(args.link, args.host, args.port)) as runner:
+        with make_runner(opts, args) as runner:
             print(f"url: {runner.url}", flush=True)
             print(f"eyehil emulate: {opts.mode} device, scene {opts.scene}, eyes {opts.eyes}[{opts.eye}], "
                   f"script {opts.script}, {opts.clock} clock; Ctrl-C stops", flush=True)

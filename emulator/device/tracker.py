@@ -10,6 +10,10 @@ sleeps or starts a thread; the core is not thread-safe (a link runner serialises
 - Streaming: one FEATURES per exposure at the configured rate, timestamped at mid-exposure; samples
   that would push the output backlog past `max_output_bytes` are dropped (STATUS `samples_dropped`,
   gaps in `frame_id`), never queued without bound.
+- Frames (if the subject's solver carries appearance channels): each exposure's images as FRAME_CHUNKs
+  behind the FEATURES (`frame_stream`; dropped images counted in `frames_dropped`). The FEATURES limit
+  grows by the frame budget, which the link's backlog may hold in chunks. With frames, `next_due_us` asks
+  for one exposure at a time (a fast clock never outruns the images) and for an early look while chunks wait.
 - STIMULUS moves the simulated subject's target (`emulator.device.stimulus`).
 """
 
@@ -19,10 +23,11 @@ import numpy as np
 
 from emulator.device.camera import Camera, Selection
 from emulator.device.clock import Clock, RealTimeClock
+from emulator.device.frame_stream import FrameOptions, FrameStream
 from emulator.device.stimulus import stimulus_problem, stimulus_to_screen
 from emulator.device.subject import Subject
 from protocols.batch import pack_features_batch
-from protocols.enums import Capability, DeviceState, Eye, EyeSelect, StimulusFlags
+from protocols.enums import Capability, DeviceState, Eye, EyeSelect, StimulusFlags, StreamSelect
 from protocols.errors import ErrorCode
 from protocols.framing import encode_frame
 from protocols.header import MAX_PAYLOAD, PROTOCOL_VERSION, Header
@@ -35,14 +40,16 @@ from protocols.stream import NativeReceiver, Received, SequenceTracker
 MODEL = "eyehil virtual tracker"
 FIRMWARE_VERSION = "0.1.0"
 U32 = 1 << 32
+PENDING_WAKE_US = 500  # while chunks wait, the runner looks again this soon (device us)
 
 
 class VirtualTracker:
     """The emulated eye tracker speaking the native protocol; see the module docstring."""
 
     def __init__(self, subject: Subject, clock: Clock | None = None, *, default_rate_hz: int = 250,
-                 max_output_bytes: int = 32_768) -> None:
-        """A device in front of `subject` (its scene gives the sensor, the LEDs and the eyes it can see)."""
+                 max_output_bytes: int = 32_768, frames: FrameOptions | None = None) -> None:
+        """A device in front of `subject` (its scene gives the sensor, the LEDs and the eyes it can see); it streams
+        frames (as `frames` say) if the subject's solver carries appearance channels."""
         scene = subject.solver.scene
         if len(scene.leds) not in (1, 2):
             raise ValueError(f"the protocol supports 1 or 2 LEDs; scene {scene.name} has {len(scene.leds)}")
@@ -52,6 +59,8 @@ class VirtualTracker:
         self.sensor = tuple(int(v) for v in scene.camera.resolution_px)
         self.tracked = tuple(Eye.RIGHT if s == "right" else Eye.LEFT for s in scene.sides)
         self.camera = Camera(subject, self.sensor, self.tracked)
+        self.frames = FrameStream.for_subject(subject, self.tracked, frames)  # None: this subject has no images
+        self._stream = StreamSelect.FEATURES
         self.max_output_bytes = max_output_bytes
         self.state = DeviceState.IDLE
         self._rate = default_rate_hz
@@ -70,6 +79,7 @@ class VirtualTracker:
         """DEVICE_INFO as the device would send it now (the rate reflects an accepted CONFIGURE)."""
         caps = Capability.FEATURES | Capability.ROI | Capability.TIME_SYNC | Capability.STIMULUS | Capability.ISCAN
         caps |= Capability.BINOCULAR if len(self.tracked) == 2 else 0
+        caps |= Capability.FRAMES if self.frames is not None else 0
         rate = self._config.rate_hz if self._config else self._rate
         return DeviceInfo(PROTOCOL_VERSION, PROTOCOL_VERSION, *self.sensor, MIN_RATE_HZ, MAX_RATE_HZ, rate,
                           len(self.subject.solver.scene.leds), caps, MAX_PAYLOAD, MODEL, FIRMWARE_VERSION)
@@ -81,7 +91,8 @@ class VirtualTracker:
                                                           "oversized_frames", "unknown_messages", "version_errors",
                                                           "malformed_messages")}
         tx = {name: value % U32 for name, value in self._tx.items()}
-        return Status(self.state, frames_sent=0, frames_dropped=0, **rx, **tx)
+        sent, dropped = (self.frames.sent, self.frames.dropped) if self.frames else (0, 0)
+        return Status(self.state, frames_sent=sent % U32, frames_dropped=dropped % U32, **rx, **tx)
 
     # --- bytes in ---------------------------------------------------------------------------
     def feed(self, data: bytes | bytearray | memoryview) -> None:
@@ -137,7 +148,11 @@ class VirtualTracker:
         cfg = self._config or default_configure(self.info)
         eyes = tuple(e for e in (Eye.RIGHT, Eye.LEFT) if EyeSelect(1 << e) in cfg.eyes)
         roi = (cfg.roi_x, cfg.roi_y, cfg.roi_w, cfg.roi_h) if cfg.roi_w else None
-        self.camera.start(self.clock.now_us(), cfg.rate_hz, Selection(eyes, cfg.leds, roi))
+        selection = Selection(eyes, cfg.leds, roi)
+        self.camera.start(self.clock.now_us(), cfg.rate_hz, selection)
+        self._stream = cfg.stream
+        if self._with_frames:
+            self.frames.start(selection)
         self._sample_size = FEATURES_HEAD.size + len(eyes) * (EYE_RECORD.size + cfg.leds * GLINT_RECORD.size) + 22
         self.state = DeviceState.STREAMING
         return self._ack(h)
@@ -145,6 +160,8 @@ class VirtualTracker:
     def _stop(self, h: Header, m: Stop) -> Ack:
         if self.state is DeviceState.STREAMING:
             self.camera.stop()
+            if self._with_frames:
+                self.frames.stop()
             self.state = DeviceState.IDLE
         return self._ack(h)
 
@@ -159,35 +176,61 @@ class VirtualTracker:
         return self._ack(h)
 
     # --- bytes out --------------------------------------------------------------------------
+    @property
+    def _with_frames(self) -> bool:
+        return self.frames is not None and StreamSelect.FRAMES in self._stream
+
     def next_due_us(self, count: int = 1) -> int | None:
-        """Device time by which the next `count` samples are due, or None when idle."""
-        return self.camera.time_of(self.camera.taken + count - 1) if self.state is DeviceState.STREAMING else None
+        """Device time by which the next `count` samples are due (one with frames; sooner while chunks wait), or
+        None when idle."""
+        if self.state is not DeviceState.STREAMING:
+            return None
+        count = 1 if self._with_frames else count
+        due = self.camera.time_of(self.camera.taken + count - 1)
+        return min(due, self.clock.now_us() + PENDING_WAKE_US) if self._with_frames and self.frames.pending else due
 
     def poll(self, now_us: int | None = None, backlog: int = 0) -> int:
-        """Queue the samples due by `now_us` (default: the clock); return how many were queued.
+        """Queue the samples due by `now_us` (default: the clock); return how many exposures were taken.
 
-        `backlog`: bytes already queued downstream (in the link). Samples that do not fit under
-        `max_output_bytes` are dropped, the oldest first, and counted in `samples_dropped`.
+        `backlog`: bytes already queued downstream (in the link). FEATURES that do not fit under
+        `max_output_bytes` (plus the frame budget when frames are streamed) are dropped, the oldest first, and
+        counted in `samples_dropped`; images as `frame_stream` says.
         """
         if self.state is not DeviceState.STREAMING:
             return 0
+        if self._with_frames:
+            self.frames.downstream(backlog)
         due = self.camera.due(self.clock.now_us() if now_us is None else now_us)
         if due == 0:
             return 0
-        room = max(0, self.max_output_bytes - len(self._out) - backlog) // self._sample_size
+        room = self._room(backlog) if StreamSelect.FEATURES in self._stream else due
         if room < due:
             self.camera.skip(due - room)
             self._tx["samples_dropped"] += due - room
+            if self._with_frames:
+                self.frames.skip(due - room)
         if room == 0:
             return 0
         exp = self.camera.take(min(room, due))
+        if StreamSelect.FEATURES in self._stream:
+            self._queue_features(exp)
+        if self._with_frames:
+            self.frames.offer(exp)
+        return len(exp)
+
+    def _room(self, backlog: int) -> int:
+        """How many FEATURES fit in the output limit now."""
+        limit = self.max_output_bytes + (self.frames.options.budget_bytes if self._with_frames else 0)
+        return max(0, limit - len(self._out) - backlog) // self._sample_size
+
+    def _queue_features(self, exp) -> None:
+        """Encode the FEATURES of exposures `exp` (camera.Exposures) into the output."""
         frames = pack_features_batch(exp.batch, self._seq, exp.time_us)
         rows = frames.view(np.uint8).reshape(len(frames), -1)
         self._out += b"".join(encode_frame(row.tobytes()) for row in rows)
         self._seq = (self._seq + len(exp)) % U32
         self._tx["tx_frames"] += len(exp)
         self._tx["samples_sent"] += len(exp)
-        return len(exp)
 
     @property
     def pending(self) -> int:
@@ -195,7 +238,12 @@ class VirtualTracker:
         return len(self._out)
 
     def read_available(self, max_bytes: int | None = None) -> bytes:
-        """Take up to `max_bytes` (default all) queued bytes for the host."""
+        """Take up to `max_bytes` (default all) queued bytes for the host; chunks join as the frame budget allows."""
+        if self._with_frames and self.frames.pending and self.state is DeviceState.STREAMING:
+            data, n = self.frames.release(len(self._out), self._seq)
+            self._out += data
+            self._seq = (self._seq + n) % U32
+            self._tx["tx_frames"] += n
         n = len(self._out) if max_bytes is None else min(max_bytes, len(self._out))
         data = bytes(self._out[:n])
         del self._out[:n]

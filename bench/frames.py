@@ -1,0 +1,93 @@
+"""Benchmark: camera images streamed by the virtual tracker (FRAME_CHUNKs) and detected on the host.
+
+The device runs in its own process (`eyehil emulate --link pty|tcp --script demo --clock fast`, guestrin2006:
+one eye, one 320 x 240 crop per exposure, MONO8, 19 chunks); the host (this process) configures frames only,
+reassembles the chunks (`drivers.wire`) and counts the images delivered per second of wall time, with the
+device's STATUS `frames_dropped`. The fast clock lets the device run as fast as the link and host allow, but
+never slower than the wall clock: exposures the device cannot render and send within the frame interval of the
+configured rate are dropped, so the rate (`RATE_HZ`) is set below what the link carries. Then detection
+throughput: `drivers.detect.detect_eye` on the received images, one core. Target (issue "Synthetic infrared
+frames"): hundreds (here >= `TARGET_FPS`) of 320 x 240 frames per second over a pty and TCP.
+"""
+
+from __future__ import annotations
+
+import time
+
+import cv2
+
+from bench.device import emulator
+from drivers.client import open_tracker
+from drivers.detect import detect_eye
+from protocols.enums import StreamSelect
+
+LINKS = ("pty", "tcp")
+RATE_HZ = 100
+SECONDS = 2.0
+TARGET_FPS = 200.0
+
+
+def delivered(link: str, seconds: float = SECONDS) -> dict:
+    """Images per second received over `link` (fast clock), the device's drops, and the images (for detection)."""
+    with emulator("--link", link, "--clock", "fast", "--rate", str(RATE_HZ)) as url, open_tracker(url) as tracker:
+        tracker.configure(stream=StreamSelect.FRAMES)
+        tracker.start()
+        wire, images = tracker.wire, []
+        while not wire.images:
+            wire.pump(1.0)
+        wire.images.clear()
+        before, start = tracker.status(), time.perf_counter()
+        while time.perf_counter() - start < seconds:
+            wire.pump(0.1)
+            while wire.images:
+                images.append(wire.images.popleft())
+        elapsed = time.perf_counter() - start
+        tracker.stop()
+        status = tracker.status()
+    return {"fps": len(images) / elapsed, "mb_per_s": sum(g.image.pixels.nbytes for g in images) / elapsed / 1e6,
+            "dropped": status.frames_dropped - before.frames_dropped, "sent": status.frames_sent - before.frames_sent,
+            "images": images}
+
+
+def detection_fps(images: list, repeats: int) -> float:
+    """Best-of-`repeats` images detected per second on one core."""
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        best = float("inf")
+        for _ in range(repeats):
+            start = time.perf_counter()
+            for g in images:
+                detect_eye(g.image.pixels, 2, roi_xy=(g.image.roi_x, g.image.roi_y))
+            best = min(best, time.perf_counter() - start)
+    finally:
+        cv2.setNumThreads(threads)
+    return len(images) / best
+
+
+def run(repeats: int = 3) -> dict:
+    """Per link the best of `repeats` runs; detection on the images of the last TCP run."""
+    results: dict = {}
+    for link in LINKS:
+        runs = [delivered(link) for _ in range(repeats)]
+        results[link] = max(runs, key=lambda r: r["fps"])
+    images = results["tcp"].pop("images")[:300]
+    results["pty"].pop("images")
+    results["detect_fps"] = detection_fps(images, repeats)
+    results["detected"] = len(images)
+    return results
+
+
+def report(results: dict) -> str:
+    parts = []
+    for link in LINKS:
+        r = results[link]
+        verdict = "PASS" if r["fps"] >= TARGET_FPS else "FAIL"
+        parts.append(f"{link} {r['fps']:,.0f} frames/s ({r['mb_per_s']:.1f} MB/s; device dropped {r['dropped']} of "
+                     f"{r['sent'] + r['dropped']}; target >= {TARGET_FPS:,.0f}: {verdict})")
+    return (f"320x240 frames over links, device in its own process, fast clock at {RATE_HZ} Hz: " + "; ".join(parts)
+            + f"; host detection {results['detect_fps']:,.0f} frames/s on one core ({results['detected']} images)")
+
+
+if __name__ == "__main__":
+    print(report(run(1)))

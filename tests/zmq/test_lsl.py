@@ -1,0 +1,60 @@
+"""The LSL outlet of type Gaze: a pylsl inlet finds it, reads Pupil-style channel metadata and samples with
+explicit timestamps on LSL's clock. Skips (with the reason) where pylsl or liblsl is missing."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from zmq_helpers import eventually
+
+from emulator.device.lsl_outlet import LslUnavailableError, gaze_channels, load_pylsl
+
+try:
+    pylsl = load_pylsl()
+except LslUnavailableError as exc:
+    pytest.skip(str(exc), allow_module_level=True)
+
+
+def _channels(info) -> list[dict[str, str]]:
+    """label, eye, type, unit of every channel in the stream's desc/channels."""
+    out, node = [], info.desc().child("channels").child("channel")
+    while not node.empty():
+        out.append({k: node.child_value(k) for k in ("label", "eye", "type", "unit", "coordinate_system")})
+        node = node.next_sibling()
+    return out
+
+
+def test_channel_layout() -> None:
+    labels = [c.label for c in gaze_channels((0, 1), 1)]
+    assert labels[:3] == ["confidence", "norm_pos_x", "norm_pos_y"]
+    assert labels[3:9] == ["pupil0_x", "pupil0_y", "diameter0_2d", "confidence0", "glint0_0_x", "glint0_0_y"]
+    assert len(labels) == 3 + 2 * 6
+
+
+def test_inlet_receives_gaze_stream(server) -> None:
+    srv = server(scene="guestrin2006", rate_hz=100, lsl=True)
+    streams = pylsl.resolve_byprop("source_id", srv.outlet_source_id, timeout=10)
+    assert streams, "the outlet was not found"
+    inlet = pylsl.StreamInlet(streams[0])
+    try:
+        info = inlet.info(timeout=10)
+        assert info.type() == "Gaze" and info.nominal_srate() == 100 and info.channel_format() == pylsl.cf_double64
+        channels = _channels(info)
+        assert [c["label"] for c in channels] == [c.label for c in gaze_channels((0,), 2)]
+        assert channels[1] == {"label": "norm_pos_x", "eye": "both", "type": "ScreenX", "unit": "normalized",
+                               "coordinate_system": "screen"}
+        assert channels[3] == {"label": "pupil0_x", "eye": "right", "type": "PupilX", "unit": "pixels",
+                               "coordinate_system": "eye0"}
+        sample, stamp = inlet.pull_sample(timeout=10)
+        assert sample is not None and len(sample) == len(channels)
+        assert abs(stamp - pylsl.local_clock()) < 1.0
+        values = dict(zip((c["label"] for c in channels), sample, strict=True))
+        assert math.isnan(values["norm_pos_x"]) and values["confidence"] == 0  # not calibrated
+        assert values["confidence0"] == 1 and 0 < values["pupil0_x"] < 320 and values["diameter0_2d"] > 10
+        _second, later = inlet.pull_sample(timeout=10)
+        assert later - stamp == pytest.approx(0.01, abs=2e-3)  # explicit mid-exposure times, 100 Hz
+    finally:
+        inlet.close_stream()
+        del inlet
+    eventually(lambda: srv.outlet.pushed > 2)

@@ -1,0 +1,60 @@
+"""Helpers of the ZeroMQ facade tests: start a facade, wait for messages (no sleeps), pair subscriptions."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+from pupil_labs.pupil_core_network_client import Device
+
+from emulator.device.build import DeviceOptions, build_subject
+from emulator.device.subject import Behaviour
+from emulator.device.zmq_server import PupilServer, ServerOptions
+
+_DEVICE_KEYS = {"scene", "eyes", "eye", "sides", "seed"}
+
+
+def start_server(latency: float = 0.05, **options: Any) -> PupilServer:
+    """A started facade on a free port: `DeviceOptions` keys (scene, eyes, eye, sides, seed), the subject's
+    saccadic `latency` (s), and `ServerOptions` fields."""
+    device = {k: options.pop(k) for k in list(options) if k in _DEVICE_KEYS}
+    subject = build_subject(DeviceOptions(behaviour=Behaviour(latency_s=latency), **device))
+    return PupilServer(subject, options=ServerOptions(**{"port": 0, **options})).start()
+
+
+def wait_for(sub, accept: Callable[[Any], bool], timeout_s: float = 10.0) -> Any:
+    """The first message of the client subscription `sub` that `accept`s, or AssertionError at the timeout."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        message = sub.recv_new_message(timeout_ms=100)
+        if message is not None and accept(message):
+            return message
+    raise AssertionError(f"no accepted message within {timeout_s} s")
+
+
+def topic_is(topic: str) -> Callable[[Any], bool]:
+    return lambda m: m.topic == topic
+
+
+def subscribed(device: Device, sub, timeout_s: float = 10.0) -> None:
+    """Return once `sub` (which must subscribe to ``notify.``) receives what `device` sends: ZeroMQ
+    subscriptions take effect a little after connecting."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        device.send_notification({"subject": "test.hello"})
+        message = sub.recv_new_message(timeout_ms=50)
+        while message is not None:
+            if message.topic == "notify.test.hello":
+                return
+            message = sub.recv_new_message(timeout_ms=0)
+    raise AssertionError("the subscription never received a notification")
+
+
+def eventually(condition: Callable[[], bool], timeout_s: float = 10.0) -> None:
+    """Poll `condition` (something another thread will make true) until it holds, or AssertionError."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"condition not met within {timeout_s} s")
+        time.sleep(0.005)
