@@ -2,47 +2,25 @@
 
 `no_leaks` (autouse) fails a test that leaves an emulator thread ("eyehil-..."), link, pseudo-terminal,
 socket or pipe open (python-can's test/conftest.py idea). `device_url` runs a test once per backend
-(loop, pty, tcp; usbip to be added by its module), in the style of python-can's back2back_test.py.
+(loop, pty, tcp, usbip), in the style of python-can's back2back_test.py.
 """
 
 from __future__ import annotations
 
-import os
-import threading
 from collections.abc import Callable, Iterator
 
 import pytest
 from device_helpers import start_emulator
-
-from emulator.device.links import open_links
+from leaks import leak_check
 
 BACKENDS = ["loop", "pty", "tcp", "usbip"]
 
 
-def _descriptors() -> set[str]:
-    """Open sockets, pseudo-terminals and pipes of this process (Linux /proc)."""
-    found = set()
-    for fd in os.listdir("/proc/self/fd"):
-        try:
-            target = os.readlink(f"/proc/self/fd/{fd}")
-        except OSError:
-            continue
-        if target.startswith(("socket:", "pipe:", "/dev/ptmx", "/dev/pts/")):
-            found.add(f"fd {fd} -> {target}")
-    return found
-
-
 @pytest.fixture(autouse=True)
 def no_leaks() -> Iterator[None]:
-    """Fail the test if it leaves an emulator thread, link or descriptor behind."""
-    linux = os.path.isdir("/proc/self/fd")
-    before = _descriptors() if linux else set()
-    yield
-    threads = [t.name for t in threading.enumerate() if t.name.startswith("eyehil")]
-    assert not threads, f"emulator threads left running: {threads}"
-    assert not open_links(), f"links left open: {open_links()}"
-    leaked = (_descriptors() - before) if linux else set()
-    assert not leaked, f"descriptors left open: {sorted(leaked)}"
+    """Fail the test if it leaves an emulator thread, link, pseudo-terminal, socket or pipe behind."""
+    with leak_check("eyehil", kinds=("socket:", "pipe:", "/dev/ptmx", "/dev/pts/")):
+        yield
 
 
 @pytest.fixture(params=BACKENDS)

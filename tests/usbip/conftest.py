@@ -7,39 +7,21 @@ Every test fails if it leaves an `eyehil-usbip-*` thread alive or a socket open 
 
 from __future__ import annotations
 
-import os
-import threading
 from collections.abc import Iterator
 
 import pytest
+from leaks import leak_check
 from usbip_helpers import Collector, RawHost
 
 from drivers.links.usbip import UsbipSerial
 from emulator.device.usbip_server import UsbipCdcServer
 
 
-def _open_sockets() -> set[str]:
-    found = set()
-    for fd in os.listdir("/proc/self/fd"):
-        try:
-            target = os.readlink(f"/proc/self/fd/{fd}")
-        except OSError:
-            continue
-        if target.startswith("socket:"):
-            found.add(f"fd {fd} -> {target}")
-    return found
-
-
 @pytest.fixture(autouse=True)
 def no_leaks() -> Iterator[None]:
     """Fail the test if it leaves a USB/IP thread running or a socket open."""
-    linux = os.path.isdir("/proc/self/fd")
-    before = _open_sockets() if linux else set()
-    yield
-    threads = [t.name for t in threading.enumerate() if t.name.startswith("eyehil-usbip")]
-    assert not threads, f"threads left running: {threads}"
-    leaked = (_open_sockets() - before) if linux else set()
-    assert not leaked, f"sockets left open: {leaked}"
+    with leak_check("eyehil-usbip", kinds=("socket:",)):
+        yield
 
 
 @pytest.fixture
