@@ -17,6 +17,7 @@ import numpy as np
 
 from emulator.device.camera import Camera, Selection
 from emulator.device.clock import Clock, RealTimeClock
+from emulator.device.links import take
 from emulator.device.subject import Subject
 from protocols.enums import Eye, GlintFlags, PupilFlags
 from protocols.iscan import DEFAULT_OUTPUTS, IscanCommand, IscanOutput, encode_samples, parse_commands, select_outputs
@@ -85,10 +86,7 @@ class IscanTracker:
 
     def read_available(self, max_bytes: int | None = None) -> bytes:
         """Take up to `max_bytes` (default all) queued bytes."""
-        n = len(self._out) if max_bytes is None else min(max_bytes, len(self._out))
-        data = bytes(self._out[:n])
-        del self._out[:n]
-        return data
+        return take(self._out, max_bytes)
 
     def close(self) -> None:
         """Release the subject's worker thread."""

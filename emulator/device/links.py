@@ -60,6 +60,14 @@ FAST_STEPS = 4  # fast clock: steps between two looks at the host's commands
 IDLE_WAIT_S = 0.25
 
 
+def take(buffer: bytearray, max_bytes: int | None = None) -> bytes:
+    """Remove and return up to `max_bytes` (default all) bytes from the front of a core's output buffer."""
+    n = len(buffer) if max_bytes is None else min(max_bytes, len(buffer))
+    data = bytes(buffer[:n])
+    del buffer[:n]
+    return data
+
+
 def register_open(link: object, name: str) -> None:
     """Record that `link` holds resources (file descriptors, sockets, threads)."""
     with _OPEN_LOCK:

@@ -24,6 +24,7 @@ import numpy as np
 from emulator.device.camera import Camera, Selection
 from emulator.device.clock import Clock, RealTimeClock
 from emulator.device.frame_stream import FrameOptions, FrameStream
+from emulator.device.links import take
 from emulator.device.stimulus import stimulus_problem, stimulus_to_screen
 from emulator.device.subject import Subject
 from protocols.batch import pack_features_batch
@@ -244,10 +245,7 @@ class VirtualTracker:
             self._out += data
             self._seq = (self._seq + n) % U32
             self._tx["tx_frames"] += n
-        n = len(self._out) if max_bytes is None else min(max_bytes, len(self._out))
-        data = bytes(self._out[:n])
-        del self._out[:n]
-        return data
+        return take(self._out, max_bytes)
 
     def close(self) -> None:
         """Release the subject's worker thread."""
