@@ -4,7 +4,8 @@
 - `header`, `messages`, `replies`, `samples`, `native`: the eyehil native protocol (docs/protocol.md);
 - `stream`: bytes in, decoded messages, faults, counters and sequence gaps out;
 - `batch`: vectorised FEATURES encoding/decoding with numpy; `images`: FRAME_CHUNK split/reassembly;
-- `iscan`: the ISCAN-compatible legacy mode;
+- `iscan`: the ISCAN-compatible legacy mode; `pupil`: the Pupil Core Network API (ZeroMQ payloads);
+- `usbip`, `usbip_urb`, `usb_descriptors`: USB/IP messages and the CDC-ACM device's descriptors;
 - `errors`: the exception tree (drawn in its docstring) and the ERROR codes.
 """
 
