@@ -1,0 +1,280 @@
+"""The camera behind the C firmware's host HAL: a simulated subject's features, one text line per request.
+
+`firmware_stubs/hal_sensor.c` (the host build of the reference firmware) asks this process for the detected
+features of each camera exposure and forwards the host's STIMULUS messages to it. The firmware owns the clock
+(every time here is its device time, us), the exposure schedule and the frame ids; this side is the optics
+and the detector: `Subject.observe` (exact ray-traced fixations, interpolated movements) then `camera.detect`
+(flags, region of interest, LEDs), the code the Python `VirtualTracker` streams from, so the C firmware sends
+the same values, rounded once to float32. Image px (OpenCV convention), degrees, screen mm as on the wire.
+
+Line protocol (ASCII; the firmware sends one request line, this side answers one line; fields separated by one
+space; floats printed with `repr`, which reads back to the same float64). Full table: firmware_stubs/README.md.
+
+    HELLO 1                                   -> INFO <width_px> <height_px> <led_count> <eyes> <stimulus>
+    LEDS <count>                              -> OK
+    START <rate_hz> <eyes> <roi_x> <roi_y> <roi_w> <roi_h>    -> OK
+    STOP                                      -> OK
+    EXPOSE <t_us>                             -> FEATURES <n_eyes> then per eye: <eye> <flags> <cx> <cy> <a> <b>
+                                                 <angle_deg> <confidence> <n_glints>, then per glint: <led>
+                                                 <flags> <x> <y>
+    STIMULUS <t_us> <target_id> <x_mm> <y_mm> <flags>         -> OK, or ERR <reason> (position refused)
+    anything else                             -> ERR <reason>
+
+`FirmwareSensor` is the protocol without I/O; `SensorServer` serves it on a Unix socket to one firmware at a
+time, on one thread named "eyehil-sensor ..."; ``python -m emulator.device.firmware_sensor --socket PATH``
+runs one until interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import os
+import selectors
+import signal
+import socket
+import threading
+from collections.abc import Callable
+
+import numpy as np
+
+from emulator.device.build import DeviceOptions, build_subject, options_from_query
+from emulator.device.camera import Selection, detect
+from emulator.device.links import register_open, unregister
+from emulator.device.stimulus import stimulus_problem, stimulus_to_screen
+from emulator.device.subject import Subject
+from protocols.enums import Eye, StimulusFlags
+
+MAX_LINE = 4096  # bytes of one request line
+
+
+def _ints(args: list[str], count: int) -> list[int]:
+    """`count` decimal integers, or ValueError."""
+    if len(args) != count:
+        raise ValueError(f"expected {count} fields, got {len(args)}")
+    return [int(a) for a in args]
+
+
+def format_features(fields: dict[str, np.ndarray], eyes: tuple[Eye, ...], leds: int) -> str:
+    """The FEATURES reply line of the first sample of `camera.detect` output (E eyes, `leds` glints each)."""
+    parts = ["FEATURES", str(len(eyes))]
+    for e, eye in enumerate(eyes):
+        ellipse = (*fields["centre"][0, e], *fields["axes"][0, e], fields["angle_deg"][0, e],
+                   fields["confidence"][0, e])
+        parts += [str(int(eye)), str(int(fields["flags"][0, e])), *(repr(float(v)) for v in ellipse), str(leds)]
+        for g in range(leds):
+            xy = fields["glint_xy"][0, e, g]
+            parts += [str(g), str(int(fields["glint_flags"][0, e, g])), repr(float(xy[0])), repr(float(xy[1]))]
+    return " ".join(parts)
+
+
+class FirmwareSensor:
+    """Answers the firmware's request lines from a simulated subject; see the module docstring. Not thread-safe."""
+
+    def __init__(self, subject: Subject) -> None:
+        """The camera of `subject`'s scene (sensor size, LEDs, the eyes it sees) in front of `subject`."""
+        scene = subject.solver.scene
+        self.subject = subject
+        self.sensor = tuple(int(v) for v in scene.camera.resolution_px)
+        self.tracked = tuple(Eye.RIGHT if s == "right" else Eye.LEFT for s in scene.sides)
+        self.led_count = len(scene.leds)
+        self.leds = 0
+        self._eyes: tuple[Eye, ...] | None = None  # selected at START; None while stopped
+        self._roi: tuple[int, int, int, int] | None = None
+        self.stimuli: list[tuple[int, int, float, float, int]] = []  # accepted: (t_us, target_id, x_mm, y_mm, flags)
+        self._requests: dict[str, Callable[[list[str]], str]] = {
+            "HELLO": self._hello, "LEDS": self._leds, "START": self._start, "STOP": self._stop,
+            "EXPOSE": self._expose, "STIMULUS": self._stimulus}
+
+    @classmethod
+    def from_options(cls, options: DeviceOptions | None = None) -> FirmwareSensor:
+        """A sensor in front of the subject `options` describe (scene, eye, head, behaviour, script, seed; the
+        device's rate, clock and mode are the firmware's business and are ignored)."""
+        return cls(build_subject(options or DeviceOptions(), appearance=False))
+
+    def handle(self, line: str) -> str:
+        """The reply line (without newline) to one request line."""
+        word, *args = line.split() or [""]
+        request = self._requests.get(word)
+        if request is None:
+            return f"ERR unknown request {word[:20]!r}"
+        try:
+            return request(args)
+        except ValueError as exc:
+            return f"ERR {word}: {exc}"
+
+    def features(self, times_us: np.ndarray) -> dict[str, np.ndarray]:
+        """Detected features (`camera.detect` fields) of exposures at `times_us` (ascending) with the current
+        selection and LEDs."""
+        if self._eyes is None:
+            raise ValueError("not started")
+        obs = self.subject.observe(np.asarray(times_us, dtype=np.int64))
+        return detect(obs.values, obs.blink, Selection(self._eyes, self.leds, self._roi), self.tracked, self.sensor)
+
+    def close(self) -> None:
+        """Release the subject's worker thread."""
+        self.subject.close()
+
+    # --- requests ---------------------------------------------------------------------------------------------
+    def _hello(self, args: list[str]) -> str:
+        _ints(args, 1)
+        self.leds, self._eyes = 0, None
+        eyes = sum(1 << int(e) for e in self.tracked)
+        return f"INFO {self.sensor[0]} {self.sensor[1]} {self.led_count} {eyes} 1"
+
+    def _leds(self, args: list[str]) -> str:
+        (count,) = _ints(args, 1)
+        if not 0 <= count <= self.led_count:
+            raise ValueError(f"{count} LEDs, the scene has {self.led_count}")
+        self.leds = count
+        return "OK"
+
+    def _start(self, args: list[str]) -> str:
+        rate, eyes, *roi = _ints(args, 6)
+        if not (rate > 0 and 1 <= eyes <= 3):
+            raise ValueError("rate or eyes out of range")
+        self._eyes = tuple(e for e in (Eye.RIGHT, Eye.LEFT) if eyes & (1 << e))
+        self._roi = (roi[0], roi[1], roi[2], roi[3]) if roi[2] else None
+        return "OK"
+
+    def _stop(self, args: list[str]) -> str:
+        _ints(args, 0)
+        self._eyes = None
+        return "OK"
+
+    def _expose(self, args: list[str]) -> str:
+        (t_us,) = _ints(args, 1)
+        return format_features(self.features(np.array([t_us])), self._eyes, self.leds)
+
+    def _stimulus(self, args: list[str]) -> str:
+        if len(args) != 5:
+            raise ValueError(f"expected 5 fields, got {len(args)}")
+        t_us, target_id, flags = int(args[0]), int(args[1]), int(args[4])
+        x_mm, y_mm = float(args[2]), float(args[3])
+        screen = self.subject.solver.scene.screen
+        problem = stimulus_problem(screen, x_mm, y_mm)
+        if problem is not None:
+            return f"ERR {problem}"
+        if flags & StimulusFlags.VISIBLE:
+            self.subject.look_at(stimulus_to_screen(screen, x_mm, y_mm), t_us)
+        self.stimuli.append((t_us, target_id, x_mm, y_mm, flags))
+        return "OK"
+
+
+class SensorServer:
+    """Serves a `FirmwareSensor` on a Unix stream socket at `path`, one firmware connection at a time (a new one
+    replaces the old), on one thread; a context manager. It owns the sensor: `close` closes it too."""
+
+    def __init__(self, sensor: FirmwareSensor, path: str | os.PathLike[str]) -> None:
+        """Bind and listen at `path` (which must not exist); call `start` (or use `with`)."""
+        self.sensor, self.path = sensor, os.fspath(path)
+        self.failure: Exception | None = None  # what stopped the thread, if it died
+        self.connections = 0
+        self._listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._conn: socket.socket | None = None
+        self._pending = b""
+        try:
+            self._listener.bind(self.path)
+            self._listener.listen(1)
+        except OSError:
+            self._close_sockets()
+            raise
+        self._thread = threading.Thread(target=self._run, name=f"eyehil-sensor {self.path}", daemon=True)
+        register_open(self, f"sensor {self.path}")
+
+    def start(self) -> SensorServer:
+        self._thread.start()
+        return self
+
+    def __enter__(self) -> SensorServer:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _run(self) -> None:
+        try:
+            with selectors.DefaultSelector() as selector:
+                selector.register(self._listener, selectors.EVENT_READ)
+                selector.register(self._wake_r, selectors.EVENT_READ)
+                while self._serve_once(selector):
+                    pass
+        except Exception as exc:  # a bug: the connection closes (the firmware then stops) instead of hanging
+            self.failure = exc
+            logging.getLogger(__name__).exception("firmware sensor on %s stopped", self.path)
+        finally:
+            self._drop(None)
+
+    def _serve_once(self, selector: selectors.BaseSelector) -> bool:
+        """Handle what is ready; False when asked to stop."""
+        for key, _ in selector.select():
+            if key.fileobj is self._wake_r:
+                return False
+            if key.fileobj is self._listener:
+                self._drop(selector)
+                self._conn, _ = self._listener.accept()
+                self.connections += 1
+                selector.register(self._conn, selectors.EVENT_READ)
+            elif key.fileobj is self._conn and not self._answer(self._conn.recv(65536)):
+                self._drop(selector)
+        return True
+
+    def _answer(self, data: bytes) -> bool:
+        """Answer every complete request line in `data`; False when the firmware has gone (or sent garbage)."""
+        self._pending += data
+        while (end := self._pending.find(b"\n")) >= 0:
+            line, self._pending = self._pending[:end], self._pending[end + 1 :]
+            reply = self.sensor.handle(line.decode("ascii", errors="replace"))
+            self._conn.sendall(reply.encode("ascii") + b"\n")
+        return bool(data) and len(self._pending) <= MAX_LINE
+
+    def _drop(self, selector: selectors.BaseSelector | None) -> None:
+        """Close the firmware connection, if any."""
+        if self._conn is not None:
+            if selector is not None:
+                selector.unregister(self._conn)
+            self._conn.close()
+        self._conn, self._pending = None, b""
+
+    def _close_sockets(self) -> None:
+        for s in (self._listener, self._wake_r, self._wake_w):
+            s.close()
+
+    def close(self) -> None:
+        """Stop the thread, close every socket, remove the socket file, close the sensor; idempotent."""
+        with contextlib.suppress(OSError):
+            self._wake_w.send(b"x")
+        if self._thread.is_alive():
+            self._thread.join()
+        self._close_sockets()
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(self.path)
+        self.sensor.close()
+        unregister(self)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m emulator.device.firmware_sensor --socket PATH [--scene S] [--options QUERY]``."""
+    parser = argparse.ArgumentParser(prog="python -m emulator.device.firmware_sensor", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--socket", required=True, help="Unix socket path to listen on (the firmware's --sensor)")
+    parser.add_argument("--scene", default="guestrin2006", help="scene preset or TOML path")
+    parser.add_argument("--options", default="", help="more device options, e.g. 'eyes=published&eye=17&script=demo'")
+    args = parser.parse_args(argv)
+    options = options_from_query(args.options, DeviceOptions(scene=args.scene))
+    stop = threading.Event()
+    previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        with SensorServer(FirmwareSensor.from_options(options), args.socket) as server:
+            print(f"sensor: {server.path}", flush=True)
+            with contextlib.suppress(KeyboardInterrupt):
+                stop.wait()
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
