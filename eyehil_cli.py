@@ -19,6 +19,7 @@ COMMANDS: dict[str, str] = {
     "record": "drivers.cli:register_record",
     "render": "emulator.cli_render:register",
     "study": "analysis.cli_study:register",
+    "discrepancy": "analysis.cli_discrepancy:register",
 }
 
 

@@ -1,0 +1,166 @@
+"""The effects registry and the discrepancy workflow, tested blind on data in which an effect is hidden.
+
+Hidden-effect tests: "measured" data are simulated on other eyes (a Rozema 2011 draw, seed 11, 20 eyes;
+noise seed 5) with one effect at a known value; the workflow runs on 12 of the published eyes (noise
+seed 0) without being told, and must (a) find a significant gap, (b) name the hidden effect, (c) fit its
+parameter near the hidden value and (d) shrink the gap measure D by >= 70 %, adding nothing else.
+
+Tolerances (c) come from the eye samples, not from the search (whose resolution is 1/16 of a grid step,
+then a parabola): the two samples differ in how strongly each eye responds to an effect (per-eye spread
+of the induced error about 15-20 % of its mean), so their means differ by about 20 % x sqrt(1/12 + 1/20)
+= 7 % at equal parameter: about 15 % of the hidden value at 2 SDs (pupil change 0.10 mm of 0.7 mm; lens
+distortion 0.3 of 1.8, whose contrasts grow with k1^2).
+Feature noise is read mainly from the error level, which differs between eye samples by about
+0.2 deg x sqrt(1/12 + 1/20) = 0.07 deg; at about 2 deg per px that is 0.035 px, so 0.05 px of 0.12 px.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from analysis import experiments
+from analysis.discrepancy import hidden_measured, run_discrepancy
+from analysis.discrepancy_data import Measured, guestrin2006_real, load
+from analysis.discrepancy_guestrin import guestrin_metrics
+from analysis.discrepancy_search import max_evaluations, search_effects
+from analysis.discrepancy_stats import holm
+from emulator import effects
+from emulator.effects import Applied, simulate_with
+from emulator.eye.population import sample
+from emulator.eye.published import published_eyes
+from emulator.forward import simulate
+from emulator.scene import load_scene
+from eyehil_cli import main
+
+SEARCH_EYES = 12
+HIDDEN = [("pupil_change", {"delta_diameter_mm": -0.7}, 0.10),
+          ("lens_distortion", {"k1": 1.8}, 0.3),
+          ("feature_noise", {"sigma_px": 0.12}, 0.05)]  # an anatomy, a scene and a features effect
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_scene("guestrin2006")
+
+
+@pytest.fixture(scope="module")
+def hidden_eyes():
+    return sample(20, np.random.default_rng(11)).eyes
+
+
+def test_every_effect_is_named_documented_and_neutral(scene) -> None:
+    eyes = published_eyes()[:2]
+    plain = simulate(eyes, scene)
+    assert 4 <= len(effects.names()) <= 6
+    for name in effects.names():
+        e = effects.get(name)
+        assert e.name == name and e.reference and e.summary() and e.fitted
+        assert all(p.unit is not None and p.low < p.high and p.low <= p.default <= p.high for p in e.parameters)
+        moved = simulate_with(eyes, scene, [Applied(e, e.neutral())], rng=np.random.default_rng(0))
+        for key in ("pupil_centre_px", "glint_px", "azimuth_deg"):
+            np.testing.assert_allclose(moved.arrays[key], plain.arrays[key], atol=1e-9, err_msg=name)
+    with pytest.raises(ValueError, match="unknown effect"):
+        effects.get("tear_film")
+
+
+def test_effects_act_where_they_say(scene) -> None:
+    eyes = published_eyes()[:2]
+    plain = simulate(eyes, scene)
+    change = simulate_with(eyes, scene, [effects.parse("pupil_change=-1")])
+    np.testing.assert_allclose(change.pupil_centre_px[:, :, 0], plain.pupil_centre_px[:, :, 0], atol=1e-9)
+    assert np.all(np.abs(change.pupil_centre_px[:, :, 1:] - plain.pupil_centre_px[:, :, 1:]) > 0.1)
+    distorted = simulate_with(eyes, scene, [effects.parse("lens_distortion=2")])
+    assert np.max(np.linalg.norm(distorted.glint_px - plain.glint_px, axis=-1)) > 1.0  # grows off the axis
+    noisy = simulate_with(eyes, scene, [effects.parse("feature_noise=0.2")], rng=np.random.default_rng(3))
+    assert 0.1 < np.std(noisy.pupil_centre_px - plain.pupil_centre_px) < 0.3
+    with pytest.raises(ValueError, match="Generator"):
+        simulate_with(eyes, scene, [effects.parse("feature_noise=0.2")])
+
+
+def test_effect_specs_parse_and_refuse() -> None:
+    assert dict(effects.parse("pupil_decentre=0.2,0.1").values) == {"nasal_mm": 0.2, "superior_mm": 0.1}
+    assert effects.parse("pupil_change:nasal_per_mm=0.1,delta_diameter_mm=-1").values["nasal_per_mm"] == 0.1
+    for bad in ("head_roll", "head_roll=1,2", "nothing=1", "head_roll:tilt=3"):
+        with pytest.raises(ValueError):
+            effects.parse(bad)
+
+
+def test_batched_calibration_agrees_with_the_host_estimator(scene) -> None:
+    features = simulate(published_eyes()[:4], scene)
+    reference = experiments.guestrin(features, scene)
+    metrics, _ = guestrin_metrics(features, scene)
+    np.testing.assert_allclose(metrics["H1"], reference.h1, atol=1e-4)
+    np.testing.assert_allclose(metrics["H2"], reference.h2, atol=1e-4)
+
+
+def test_measured_data_round_trip_and_refusals(tmp_path) -> None:
+    real = guestrin2006_real()
+    assert real.paired and set(real.conditions) == {"H1", "H2"}
+    back = load(real.save(tmp_path / "m.json"))
+    np.testing.assert_allclose(back.conditions["H2"].values, real.conditions["H2"].values, atol=1e-6)
+    data = json.loads((tmp_path / "m.json").read_text())
+    data["conditions"]["H1"] = [0.3]
+    with pytest.raises(ValueError, match="at least 2"):
+        Measured.from_dict(data)
+    with pytest.raises(ValueError, match="mean"):
+        Measured.from_dict({**data, "conditions": {"C5": {"sd": 1}}})
+
+
+def test_search_recovers_a_known_quadratic_minimum_and_its_curvature() -> None:
+    def roll(batch):  # D = 4 (roll - 1.3)^2 + 3: minimum 1.3 deg, 1-sigma sqrt(2 / 8) = 0.5 deg
+        return np.array([4 * (a.values["roll_deg"] - 1.3) ** 2 + 3 for a in batch])
+
+    def decentre(batch):  # a correlated 2-D bowl around (0.2, 0.1) mm
+        x, y = (np.array([a.values[k] for a in batch]) for k in ("nasal_mm", "superior_mm"))
+        return 100 * ((x - 0.2) ** 2 + (y - 0.1) ** 2 + (x - 0.2) * (y - 0.1)) + 1
+
+    fit = search_effects([effects.get("head_roll")], roll, D0=100.0, n_conditions=7)[0]
+    assert fit.values["roll_deg"] == pytest.approx(1.3, abs=1e-6) and abs(fit.D - 3.0) < 1e-9
+    assert fit.sigma["roll_deg"] == pytest.approx(0.5, rel=1e-6) and fit.passes()
+    assert len(fit.points) <= max_evaluations(fit.effect)
+    fit2 = search_effects([effects.get("pupil_decentre")], decentre, D0=100.0, n_conditions=7)[0]
+    assert (fit2.values["nasal_mm"], fit2.values["superior_mm"]) == pytest.approx((0.2, 0.1), abs=1e-6)
+    assert fit2.sigma["nasal_mm"] == pytest.approx(np.sqrt(2 * (2 / 3) / 100), rel=1e-3)
+
+
+def test_holm_adjustment_known_answer() -> None:
+    np.testing.assert_allclose(holm(np.array([0.01, 0.04, 0.03])), [0.03, 0.06, 0.06])
+
+
+@pytest.mark.parametrize(("name", "values", "tolerance"), HIDDEN, ids=[h[0] for h in HIDDEN])
+def test_workflow_finds_names_and_fits_a_hidden_effect(hidden_eyes, name, values, tolerance) -> None:
+    hidden = Applied.of(effects.get(name), values)
+    measured = hidden_measured([hidden], eyes=hidden_eyes, seed=5)
+    result = run_discrepancy(measured, eyes=published_eyes()[:SEARCH_EYES], rounds=2, workers=2)
+    first = result.rounds[0]
+    assert first.before.significant  # (a) the gap is found
+    assert first.added is not None and first.added.effect.name == name  # (b) and named
+    for parameter, value in values.items():  # (c) at the hidden value
+        assert first.added.values[parameter] == pytest.approx(value, abs=tolerance), parameter
+    assert result.shrink >= 0.7  # (d) the gap shrinks
+    assert [a.effect.name for a in result.added] == [name]  # and nothing spurious is added
+    assert not result.after.significant
+
+
+def test_negative_control_finds_no_gap_and_adds_nothing(hidden_eyes) -> None:
+    measured = hidden_measured([], eyes=hidden_eyes, seed=5)
+    result = run_discrepancy(measured, eyes=published_eyes()[:SEARCH_EYES], rounds=2, workers=1)
+    assert not result.rounds[0].before.significant
+    assert result.added == [] and result.rounds[0].fits == []
+    assert result.after.D == result.before.D
+
+
+def test_cli_writes_the_report(tmp_path, capsys) -> None:
+    out = tmp_path / "d"
+    code = main(["discrepancy", "--hidden", "head_roll=4", "--search-eyes", "4", "--eyes", "4",
+                 "--hidden-eyes", "6", "--effects", "head_roll", "--rounds", "1", "--workers", "1",
+                 "--quiet", "--out", str(out)])
+    assert code == 0
+    assert {"report.md", "result.json", "measured.json", "discrepancy.png"} <= {p.name for p in out.iterdir()}
+    report = (out / "report.md").read_text()
+    assert "head_roll" in report and "Truth (hidden from the workflow)" in report
+    assert json.loads((out / "result.json").read_text())["added"][0]["effect"] == "head_roll"
+    assert "hidden truth: head_roll" in capsys.readouterr().out
