@@ -10,7 +10,7 @@ of fixation, pupil and every glint. Features that fall off the sensor keep their
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -105,4 +105,4 @@ def empty_features(n_eyes: int, scene: Any, heads: tuple, n_targets: int, n_poin
                     targets=None if targets is None else np.array(targets), media=media, arrays=arrays)
 
 
-__all__ = ["ARRAYS", "Features", "empty_features", "fields"]
+__all__ = ["ARRAYS", "Features", "empty_features"]

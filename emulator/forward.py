@@ -114,8 +114,7 @@ def _checked_targets(targets: np.ndarray) -> np.ndarray:
     return t
 
 
-def _poses(eye, place, los, targets, poses) -> dict[str, np.ndarray]:
-    centres = tuple(c[:, None, None, :] for c in eye_centres(eye))
+def _poses(eye, place, los, centres, targets, poses) -> dict[str, np.ndarray]:
     if poses is None:
         pad = (slice(None), None, None)
         los_b = LineOfSight(los.origin[pad], los.direction[pad], los.fovea[pad], los.valid[pad])
@@ -132,9 +131,9 @@ def _poses(eye, place, los, targets, poses) -> dict[str, np.ndarray]:
 
 def _simulate_eyes(eye: EyeModel, scene: Scene, place: Placement, targets, poses, media, n_points) -> dict:
     los = line_of_sight(eye, media)
-    out = _poses(eye, place, los, targets, poses)
-    a, b = posed(tuple(c[:, None, None, :] for c in eye_centres(eye)), out["azimuth_deg"], out["elevation_deg"],
-                 out["torsion_deg"])
+    centres = tuple(c[:, None, None, :] for c in eye_centres(eye))
+    out = _poses(eye, place, los, centres, targets, poses)
+    a, b = posed(centres, out["azimuth_deg"], out["elevation_deg"], out["torsion_deg"])
 
     def to_local(p_eye: np.ndarray) -> np.ndarray:  # (E, H, T, N, 3) eye frame -> eye-local (A^T (p - b))
         return np.einsum("ehtji,ehtnj->ehtni", a, p_eye - b[..., None, :])
@@ -145,9 +144,10 @@ def _simulate_eyes(eye: EyeModel, scene: Scene, place: Placement, targets, poses
     shape = a.shape[:3]
     camera = to_local(np.broadcast_to(place.scene_to_eye(scene.camera.position)[None, :, None, None], (*shape, 1, 3)))
     leds = to_local(np.broadcast_to(place.scene_to_eye(scene.leds)[None, :, None], shape + scene.leds.shape))
-    glints = solve_glints(cornea_optics(eye, media, 3).anterior, leds, camera)
+    optics = cornea_optics(eye, media, 3)
+    glints = solve_glints(optics.anterior, leds, camera)
     boundary = pupil_boundary(pupil_centre(eye)[..., :2], eye.pupil_radius, -eye.stop_depth, n_points)
-    exits = solve_exit_points(cornea_optics(eye, media, 3), camera, boundary[:, None, None])
+    exits = solve_exit_points(optics, camera, boundary[:, None, None])
     out.update(_image_features(scene, to_scene, glints, exits))
     out.update(_ground_truth(eye, los, a, place, to_scene))
     return out

@@ -16,7 +16,7 @@ bad file is refused with an error naming the key and the problem (`SceneError`).
 from __future__ import annotations
 
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -119,8 +119,6 @@ class Scene:
         return self.screen.targets()
 
     def with_leds(self, leds: np.ndarray) -> Scene:
-        from dataclasses import replace
-
         return replace(self, leds=np.asarray(leds, dtype=float).reshape(-1, 3))
 
 
