@@ -5,10 +5,11 @@
 - `wire`: the receive path (`Sample`, `HostStats`: sequence gaps, CRC errors, ...); `errors`: the exception tree;
 - `calibration` (through the device), `features` (samples -> estimator arrays), `setup_file` (the tracker's
   geometry file), `recording` (docs/recording.md), `cli` (eyehil info / stream / calibrate / record);
-- `gaze`: the estimators (pure numerics); `detect` (+ `detect_ellipse`, `detect_glints`): features from
-  camera frames with OpenCV; `frames`: the frames-only mode (FRAME_CHUNKs -> images -> detected samples).
+- `gaze/`: the estimators (pure numerics); `detect/`: features from camera frames with OpenCV;
+  `frames`: the frames-only mode (FRAME_CHUNKs -> images -> detected samples);
+- `urlhandlers/`: the same links as pyserial URL handlers (``eyehil+loop://`` ...).
 """
 
-from drivers.client import Tracker, open_tracker
+from eyehil.drivers.client import Tracker, open_tracker
 
 __all__ = ["Tracker", "open_tracker"]

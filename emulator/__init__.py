@@ -1,4 +1,11 @@
-"""The simulated subject and device: anatomy, optics, fixation, forward model.
+"""The simulated subject and device: anatomy, optics, fixation, forward model, frames, the virtual device.
+
+- `eye/`: anatomy (EyeModel, the Rozema 2011 population, published and normative eyes, media);
+- `optics/`: conics, refraction/reflection, glint and apparent-pupil solvers, camera, ellipse fit;
+- `scene/`: camera, LEDs, screen, targets, head positions, presets; `fixation`: Listing's-law fixations;
+- `forward`: (eyes, scene, targets) -> `features.Features`, batched; `simulate`: `eyehil simulate`;
+- `effects/`: named model extensions (the discrepancy workflow's vocabulary); `render/`: synthetic frames;
+- `device/`: the virtual tracker and its links and facades; `data/`: the figures the physics needs.
 
 Knows nothing of hosts (see DESIGN.md). Frames of reference:
 

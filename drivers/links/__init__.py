@@ -2,6 +2,9 @@
 
     link = open_link("socket://127.0.0.1:5555")    # or /dev/ttyACM0, loop://?clock=fast, spy://..., usbip://h:p
 
+Every scheme also answers to ``eyehil+<scheme>://`` (the form pyserial's `serial_for_url` opens once eyehil is
+imported, `eyehil.drivers.urlhandlers`).
+
 SerialLike, the interface every scheme returns (a subset of pyserial's `Serial`; pyserial objects
 qualify as they are)::
 
@@ -20,6 +23,9 @@ A new scheme is one module with a callable ``opener(url: str, *, timeout: float)
 function, or a dotted attribute such as a classmethod ``Class.from_url``) and one line in `SCHEMES`.
 `loop://` is the only scheme served by the emulator package (an in-process device for tests, imported
 by name only when used); the host still sees nothing but bytes.
+
+Modules: `serialport` (device paths), `tcp` (socket://), `spy` (hex dump), `usbip` (usbip://) over
+`usbip_client` (a small USB/IP client).
 """
 
 from __future__ import annotations
@@ -27,17 +33,17 @@ from __future__ import annotations
 import importlib
 from typing import Protocol
 
-from drivers.errors import LinkError, SchemeUnavailableError
+from eyehil.drivers.errors import LinkError, SchemeUnavailableError
 
 #: scheme -> (module, opener: a function or dotted attribute called as opener(url, timeout=...)).
 #: "" is a plain device path (/dev/ttyACM0, /dev/pts/5, COM3).
 SCHEMES: dict[str, tuple[str, str]] = {
-    "": ("drivers.links.serialport", "open_serial"),
-    "socket": ("drivers.links.tcp", "open_socket"),
-    "rfc2217": ("drivers.links.serialport", "open_serial"),
-    "loop": ("emulator.device.loop", "open_loop"),
-    "spy": ("drivers.links.spy", "open_spy"),
-    "usbip": ("drivers.links.usbip", "UsbipSerial.from_url"),
+    "": ("eyehil.drivers.links.serialport", "open_serial"),
+    "socket": ("eyehil.drivers.links.tcp", "open_socket"),
+    "rfc2217": ("eyehil.drivers.links.serialport", "open_serial"),
+    "loop": ("eyehil.emulator.device.links.loop", "open_loop"),
+    "spy": ("eyehil.drivers.links.spy", "open_spy"),
+    "usbip": ("eyehil.drivers.links.usbip", "UsbipSerial.from_url"),
 }
 #: what to tell the user when a scheme's module is missing
 INSTALL_HINTS: dict[str, str] = {
@@ -59,9 +65,10 @@ class SerialLike(Protocol):
 
 
 def scheme_of(url: str) -> str:
-    """The URL's scheme ("" for a plain device path)."""
+    """The URL's scheme ("" for a plain device path); ``eyehil+loop://`` (the pyserial form) is ``loop``."""
     head, sep, _ = url.partition("://")
-    return head.lower() if sep and head.isidentifier() else ""
+    head = head.lower().removeprefix("eyehil+")
+    return head if sep and head.isidentifier() else ""
 
 
 def open_link(url: str, timeout: float | None = 0.0) -> SerialLike:
@@ -77,6 +84,7 @@ def open_link(url: str, timeout: float | None = 0.0) -> SerialLike:
     except (ImportError, AttributeError) as exc:
         hint = INSTALL_HINTS.get(scheme, f"{module_name} is not available")
         raise SchemeUnavailableError(f"{url!r}: {hint} ({exc})") from exc
+    url = url.removeprefix("eyehil+")
     try:
         return opener(url, timeout=timeout)
     except (OSError, ValueError) as exc:

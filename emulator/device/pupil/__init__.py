@@ -1,0 +1,10 @@
+"""The Pupil Capture facade: the virtual tracker on the Pupil Core Network API (ZeroMQ), for unmodified clients.
+
+- `server`: `PupilServer`, which starts and stops the parts below;
+- `remote`: Pupil Remote (REQ/REP commands); `backbone`: the IPC backbone (XSUB/XPUB proxy);
+- `core`: the device thread (exposures -> datums, notifications -> actions);
+- `capture`: what Pupil Capture does with backbone messages (no sockets, no threads);
+- `calibration`: screen-marker calibration with the host estimators as gazers;
+- `datums`: Pupil time and the `pupil.<id>.2d` / `glint.<id>` datums; `gaze`: gaze datums;
+- `frames`: `frame.eye.<id>` images rendered on their own thread.
+"""

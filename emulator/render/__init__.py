@@ -1,0 +1,7 @@
+"""Synthetic infrared frames: the ray-traced geometry of each exposure drawn as 8-bit camera images.
+
+- `renderer`: `render_roi`, `render_full`, `RenderSettings`, `Truth` (the model and its noise in its docstring);
+- `geometry`: image-plane outlines of pupil, limbus, glints and eyelids (pure, batched numpy);
+- `draw`: anti-aliased drawing of one eye into a radiance canvas;
+- `cli`: `eyehil render` (example frames with their ground truth).
+"""

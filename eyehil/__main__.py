@@ -1,0 +1,5 @@
+"""`python -m eyehil ...` is the `eyehil` command."""
+
+from eyehil.cli import main
+
+raise SystemExit(main())
