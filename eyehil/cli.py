@@ -1,7 +1,8 @@
 """`eyehil`: one console command; each subcommand lives in the package it belongs to.
 
-The table maps a subcommand to "module:function"; the module is imported only when that subcommand
-runs, and its function `register(subparsers)` adds the parser and sets `func`.
+The table maps a subcommand to "module:function" and a one-line summary; the module is imported only when
+that subcommand runs (or prints its own help), so `eyehil --help` and `eyehil --version` import nothing heavy.
+The function `register(subparsers)` adds the subcommand's parser and sets `func`.
 """
 
 from __future__ import annotations
@@ -10,27 +11,36 @@ import argparse
 import importlib
 import sys
 
-COMMANDS: dict[str, str] = {
-    "simulate": "eyehil.emulator.simulate:register",
-    "emulate": "eyehil.emulator.device.cli:register",
-    "info": "eyehil.drivers.cli:register_info",
-    "stream": "eyehil.drivers.cli:register_stream",
-    "calibrate": "eyehil.drivers.cli:register_calibrate",
-    "record": "eyehil.drivers.cli:register_record",
-    "render": "eyehil.emulator.render.cli:register",
-    "study": "eyehil.analysis.study.cli:register",
-    "discrepancy": "eyehil.analysis.discrepancy.cli:register",
+COMMANDS: dict[str, tuple[str, str]] = {
+    "simulate": ("eyehil.emulator.simulate:register", "the forward model alone: ray-traced features and a summary"),
+    "emulate": ("eyehil.emulator.device.cli:register", "run a virtual eye tracker on a link until interrupted"),
+    "info": ("eyehil.drivers.cli:register_info", "host: print a tracker's device information"),
+    "stream": ("eyehil.drivers.cli:register_stream", "host: print live samples (or frames detected with OpenCV)"),
+    "calibrate": ("eyehil.drivers.cli:register_calibrate", "host: calibrate gaze through the device, then stream gaze"),
+    "record": ("eyehil.drivers.cli:register_record", "host: record samples to a file"),
+    "render": ("eyehil.emulator.render.cli:register", "write synthetic infrared frames with their ground truth"),
+    "study": ("eyehil.analysis.study.cli:register", "the replication of Fischer et al. 2023 (the main job)"),
+    "discrepancy": ("eyehil.analysis.discrepancy.cli:register", "find, name and add what the model misses"),
 }
+
+
+def _version() -> str:
+    from eyehil import __version__
+
+    return f"eyehil {__version__}"
 
 
 def build_parser(argv: list[str]) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="eyehil", description="Hardware-in-the-loop remote eye-tracker emulator.")
+    parser.add_argument("--version", action="version", version=_version())
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     wanted = next((a for a in argv if not a.startswith("-")), None)
-    for name, target in COMMANDS.items():
-        if wanted in (None, name) or wanted not in COMMANDS:
+    for name, (target, summary) in COMMANDS.items():
+        if name == wanted:
             module, func = target.split(":")
             getattr(importlib.import_module(module), func)(sub)
+        else:
+            sub.add_parser(name, help=summary)
     return parser
 
 
