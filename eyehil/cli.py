@@ -3,6 +3,9 @@
 The table maps a subcommand to "module:function" and a one-line summary; the module is imported only when
 that subcommand runs (or prints its own help), so `eyehil --help` and `eyehil --version` import nothing heavy.
 The function `register(subparsers)` adds the subcommand's parser and sets `func`.
+
+Errors end the command with one line on stderr: exit 2 for bad input (ValueError, a missing file), 1 for a
+runtime error (an OSError such as a port in use, or an eyehil, ZeroMQ or pyserial exception), 130 for Ctrl-C.
 """
 
 from __future__ import annotations
@@ -53,9 +56,22 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         return int(args.func(args) or 0)
-    except (ValueError, FileNotFoundError) as exc:
+    except KeyboardInterrupt:
+        print(f"eyehil {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except (ValueError, FileNotFoundError) as exc:  # bad input: a usage error
         print(f"eyehil {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except Exception as exc:
+        if not _expected(exc):
+            raise
+        print(f"eyehil {args.command}: error: {exc}", file=sys.stderr)
+        return 1
+
+
+def _expected(exc: BaseException) -> bool:
+    """An error the user can act on: the system's (a port in use, a refused connection) or eyehil's own."""
+    return isinstance(exc, OSError) or type(exc).__module__.split(".")[0] in ("eyehil", "zmq", "serial")
 
 
 if __name__ == "__main__":
