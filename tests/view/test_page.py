@@ -1,0 +1,152 @@
+"""The live view in a real headless Chromium: loads, eye images with overlays, controls, calibration, gaze,
+disconnection and reconnection. Every wait is on a condition of the page's state (window.eyehilView)."""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+from view_helpers import WAIT_MS, start_device
+
+from drivers.setup_file import load_geometry
+from drivers.view.server import ViewServer
+from protocols.native import DEVICE_TYPES
+from protocols.samples import Features
+from protocols.stream import NativeReceiver, Received
+
+pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
+
+
+def status(page) -> str:
+    return page.inner_text("#status")
+
+
+def test_page_loads_and_streams(page, view):
+    assert page.title() == "eyehil live view"
+    page.wait_for_function("window.eyehilView.streaming && window.eyehilView.ticks > 3", timeout=WAIT_MS)
+    assert status(page) == "streaming"
+    assert "eyehil virtual tracker" in page.inner_text("#device")
+    page.wait_for_function("window.eyehilView.stats.rate_hz > 0", timeout=WAIT_MS)
+
+
+class FeatureTap:
+    """What the device sent, decoded independently of the view: (frame id, eye) -> pupil centre (px)."""
+
+    def __init__(self, core) -> None:
+        self.receiver, self.pupils, self.lock = NativeReceiver(accept=DEVICE_TYPES), {}, threading.Lock()
+        original = core.read_available
+
+        def read_available(max_bytes=None):
+            data = original(max_bytes)
+            with self.lock:
+                for event in self.receiver.feed(data):
+                    if isinstance(event, Received) and isinstance(event.message, Features):
+                        for e in event.message.eyes:
+                            self.pupils[(event.message.frame_id, int(e.eye))] = (e.centre_x, e.centre_y)
+            return data
+        core.read_available = read_available
+
+
+DRAWN = """() => {
+  const o = window.eyehilView.overlay.right;
+  if (!o || o.source !== "image" || !o.pupil) return null;
+  const c = document.getElementById("eye-right"), d = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
+  let n = 0, sx = 0, sy = 0;
+  for (let y = 0; y < c.height; y++) for (let x = 0; x < c.width; x++) {
+    const i = 4 * (y * c.width + x);
+    if (d[i] < 45 && d[i + 1] < 45 && d[i + 2] < 45) { n++; sx += x; sy += y; }
+  }
+  return {overlay: o, dark: n ? [sx / n, sy / n, n] : null};
+}"""
+
+
+def test_eye_image_updates_and_the_pupil_overlay_lies_on_the_sent_feature(browser, geometry_file):
+    runner = start_device()
+    tap = FeatureTap(runner.core)
+    geometry = load_geometry(geometry_file()).geometry
+    try:
+        with ViewServer(runner.url, geometry=geometry) as view:
+            page = browser.new_page()
+            page.goto(view.address)
+            page.wait_for_function("window.eyehilView.imagesDrawn > 2", timeout=WAIT_MS)
+            first = page.locator("#eye-right").screenshot()
+            seen = page.evaluate("window.eyehilView.overlay.right.frame_id")
+            page.wait_for_function(f"window.eyehilView.overlay.right.frame_id > {seen}", timeout=WAIT_MS)
+            page.wait_for_function(f"window.eyehilView.overlay.right.frame_id > {seen}", timeout=WAIT_MS)
+            assert page.locator("#eye-right").screenshot() != first
+            drawn = page.evaluate(DRAWN)
+            page.close()
+    finally:
+        runner.close()
+    overlay = drawn["overlay"]
+    with tap.lock:
+        sent = tap.pupils[(overlay["frame_id"], 0)]
+    # The overlay is where the device's feature of that exposure is, in the image's pixels ...
+    assert abs(overlay["pupil"]["x"] - (sent[0] - overlay["origin"][0])) <= 2
+    assert abs(overlay["pupil"]["y"] - (sent[1] - overlay["origin"][1])) <= 2
+    # ... and on the dark pupil of the image drawn beneath it.
+    assert drawn["dark"] is not None and drawn["dark"][2] > 100
+    assert abs(drawn["dark"][0] - overlay["pupil"]["x"]) <= 2
+    assert abs(drawn["dark"][1] - overlay["pupil"]["y"]) <= 2
+
+
+def test_stop_and_start_from_the_page(page):
+    page.wait_for_function("window.eyehilView.streaming", timeout=WAIT_MS)
+    page.click("#stop")
+    page.wait_for_function("!window.eyehilView.streaming", timeout=WAIT_MS)
+    assert status(page) == "connected, idle"
+    page.wait_for_function("window.eyehilView.stats.rate_hz === 0", timeout=WAIT_MS)
+    page.click("#start")
+    page.wait_for_function("window.eyehilView.streaming && window.eyehilView.stats.rate_hz > 50", timeout=WAIT_MS)
+    assert status(page) == "streaming"
+
+
+GAZE_NEAR_TARGET = """(limit) => {
+  const v = window.eyehilView;
+  if (!v.gaze || !v.target) return false;
+  return Math.hypot(v.gaze[0] - v.target[0], v.gaze[1] - v.target[1]) < limit;
+}"""
+
+
+def test_calibrate_from_the_page_then_the_gaze_follows_the_grid(page):
+    page.wait_for_function("window.eyehilView.streaming", timeout=WAIT_MS)
+    page.select_option("#method", "guestrin")
+    page.click("#calibrate")
+    page.wait_for_function("window.eyehilView.calibration !== null", timeout=WAIT_MS)
+    calibration = page.evaluate("window.eyehilView.calibration")
+    assert calibration["ok"], calibration["error"]
+    errors = [p["error_deg"] for p in calibration["points"]]
+    assert len(errors) == 4 and all(0 <= e < 1.0 for e in errors)
+    assert float(page.inner_text("#mean-error")) == pytest.approx(calibration["mean_error_deg"], abs=0.01)
+    assert page.locator("#calibration tr").count() == 5  # header + the four validation targets
+    page.select_option("#script", "grid")
+    page.wait_for_function("window.eyehilView.script.name === 'grid' && window.eyehilView.target", timeout=WAIT_MS)
+    first = page.evaluate("window.eyehilView.target")
+    page.wait_for_function(GAZE_NEAR_TARGET, arg=10.0, timeout=WAIT_MS)  # mm on the screen
+    page.wait_for_function(f"window.eyehilView.target[0] !== {first[0]} || window.eyehilView.target[1] !== {first[1]}",
+                           timeout=WAIT_MS)
+    page.wait_for_function(GAZE_NEAR_TARGET, arg=10.0, timeout=WAIT_MS)
+
+
+def test_a_closed_device_shows_disconnected_and_the_page_reconnects(browser, geometry_file):
+    runner = start_device()
+    port = int(runner.url.rsplit(":", 1)[1])
+    geometry = load_geometry(geometry_file()).geometry
+    try:
+        with ViewServer(runner.url, geometry=geometry, timeout=1.0, retry_s=0.2) as view:
+            page = browser.new_page()
+            page.goto(view.address)
+            page.wait_for_function("window.eyehilView.streaming", timeout=WAIT_MS)
+            runner.close()
+            page.wait_for_function("!window.eyehilView.connected", timeout=WAIT_MS)
+            assert status(page) == "disconnected"
+            assert page.evaluate("document.body.className") == "disconnected"
+            runner = start_device(port=port)
+            ticks = page.evaluate("window.eyehilView.ticks")
+            page.wait_for_function("window.eyehilView.connected && window.eyehilView.streaming", timeout=WAIT_MS)
+            page.wait_for_function(f"window.eyehilView.ticks > {ticks} && window.eyehilView.stats.rate_hz > 50",
+                                   timeout=WAIT_MS)
+            assert status(page) == "streaming"
+            page.close()
+    finally:
+        runner.close()
