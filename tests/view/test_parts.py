@@ -1,0 +1,139 @@
+"""The view's parts without a browser: bounded fan-out, gaze scripts, payloads, the video file, the command."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from drivers.view.hub import CLIENT_QUEUE, INBOX, Hub
+from drivers.view.overlay import draw_overlay, features_panel
+from drivers.view.payload import HEADER_LENGTH, eye_record, image_message
+from drivers.view.scripts import GazeScript
+from drivers.view.video import VideoRecorder
+from protocols.enums import Eye, GlintFlags, PupilFlags
+from protocols.images import Image
+from protocols.samples import EyeFeatures, Glint
+
+RECORD = EyeFeatures(Eye.RIGHT, PupilFlags.DETECTED, 200.5, 150.25, 30.0, 28.0, 12.0, 0.9,
+                     (Glint(0, 210.0, 152.0), Glint(1, 0.0, 0.0, GlintFlags(0))))
+
+
+def test_a_page_that_never_reads_loses_its_oldest_messages_and_memory_stays_bounded():
+    async def scenario():
+        hub = Hub(asyncio.get_running_loop())
+        stalled, reading = hub.attach(), hub.attach()
+        got = []
+        for i in range(1000):
+            hub.publish({"type": "tick", "i": i, "stats": {}})
+            if i % 10 == 9:
+                got += await reading.get_all()
+        return hub, stalled, reading, got
+    hub, stalled, reading, got = asyncio.run(scenario())
+    assert len(stalled.queue) == CLIENT_QUEUE and stalled.dropped == 1000 - CLIENT_QUEUE
+    assert [m["i"] for m in stalled.queue] == list(range(1000 - CLIENT_QUEUE, 1000))  # the newest kept
+    assert len(got) == 1000 and reading.dropped == 0
+    assert hub.dropped == 1000 - CLIENT_QUEUE
+
+
+def test_the_threadsafe_inbox_is_bounded_when_the_loop_does_not_run():
+    loop = asyncio.new_event_loop()
+    try:
+        hub = Hub(loop)
+        for i in range(3 * INBOX):
+            hub.publish_threadsafe({"type": "tick", "i": i, "stats": {}})
+        assert len(hub._inbox) == INBOX and hub.dropped == 2 * INBOX
+    finally:
+        loop.close()
+
+
+def test_sticky_messages_reach_a_late_page():
+    async def scenario():
+        hub = Hub(asyncio.get_running_loop())
+        hub.publish({"type": "hello", "model": "x"})
+        hub.publish({"type": "tick", "stats": {}})
+        return await hub.attach().get_all()
+    assert [m["type"] for m in asyncio.run(scenario())] == ["hello"]
+
+
+@pytest.mark.parametrize("name", ["fixations", "pursuit", "grid"])
+def test_gaze_scripts_stay_on_the_screen_and_move(name):
+    script = GazeScript(name, (377.0, 301.0))
+    path = np.array([script.target_at(t) for t in np.arange(0, 30, 0.1)])
+    assert np.all((path >= 0) & (path <= [377.0, 301.0]))
+    assert len(np.unique(path, axis=0)) > 5
+
+
+def test_grid_dwells_then_moves_row_by_row():
+    script = GazeScript("grid", (300.0, 200.0), dwell_s=1.0)
+    assert script.target_at(0.2) == script.target_at(0.9) == (30.0, 20.0)
+    assert script.target_at(1.1) == (150.0, 20.0)
+    with pytest.raises(ValueError):
+        GazeScript("saccades", (1.0, 1.0))
+
+
+def test_eye_record_keeps_valid_glints_and_the_ellipse():
+    r = eye_record(RECORD)
+    assert r["detected"] and (r["x"], r["y"], r["a"], r["b"], r["angle"]) == (200.5, 150.25, 30.0, 28.0, 12.0)
+    assert r["glints"] == [{"led": 0, "x": 210.0, "y": 152.0}]
+
+
+def test_image_message_round_trip():
+    pixels = np.full((240, 320), 90, np.uint8)
+    message = image_message(Eye.RIGHT, 7, (100, 50), pixels, 1234, eye_record(RECORD))
+    (length,) = HEADER_LENGTH.unpack_from(message)
+    header = json.loads(message[4:4 + length])
+    assert header["frame_id"] == 7 and (header["roi_x"], header["roi_y"]) == (100, 50)
+    assert header["record"]["x"] == 200.5
+    decoded = cv2.imdecode(np.frombuffer(message[4 + length:], np.uint8), cv2.IMREAD_GRAYSCALE)
+    assert decoded.shape == (240, 320) and abs(int(decoded.mean()) - 90) <= 1
+
+
+def test_the_features_panel_draws_the_pupil_where_the_record_says():
+    record = eye_record(RECORD)
+    panel, origin = features_panel(record)
+    dark = np.argwhere(panel[..., 0] < 40)
+    cy, cx = dark.mean(0)
+    assert abs(cx + origin[0] - 200.5) < 1 and abs(cy + origin[1] - 150.25) < 1
+    drawn = draw_overlay(panel.copy(), record, origin)
+    assert (drawn != panel).any()
+
+
+@pytest.mark.parametrize("suffix", [".mp4", ".png"])
+def test_the_video_holds_the_frames_written(tmp_path, suffix):
+    recorder = VideoRecorder(tmp_path / f"view{suffix}", fps=1000.0)
+    record = eye_record(RECORD)
+    for k in range(5):  # frames that differ (an animated PNG merges identical ones)
+        pixels = np.full((240, 320), 120, np.uint8)
+        pixels[100:140, 140 + 10 * k:180 + 10 * k] = 10
+        recorder.image(Image(k, Eye.RIGHT, 0, 0, pixels), record)
+        recorder._last_write = 0.0  # one frame per tick, whatever the wall clock
+        recorder.tick({"eyes": {"right": record}})
+    path = recorder.close()
+    assert recorder.frames == 5
+    if suffix == ".mp4":
+        capture = cv2.VideoCapture(str(path))
+        assert int(capture.get(cv2.CAP_PROP_FRAME_COUNT)) == 5
+        ok, frame = capture.read()
+        assert ok and frame.shape == (240, 320, 3)
+    else:
+        ok, animation = cv2.imreadanimation(str(path))
+        assert ok and len(animation.frames) == 5 and animation.frames[0].shape[:2] == (240, 320)
+
+
+def test_eyehil_view_serves_a_loop_device_for_a_while(capsys, tmp_path):
+    from drivers.view.cli import register
+
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers(dest="command"))
+    video = tmp_path / "view.mp4"
+    args = parser.parse_args(["view", "loop://?scene=guestrin2006", "--port", "0", "--duration", "1.5",
+                              "--record-video", str(video)])
+    assert args.func(args) == 0
+    out = capsys.readouterr().out
+    assert "view: http://127.0.0.1:" in out and f"video: {video}" in out
+    assert video.stat().st_size > 0
