@@ -32,8 +32,9 @@ def add_view_options(p: argparse.ArgumentParser, prefix: str = "") -> None:
                    help=f"port of the page (default {DEFAULT_PORT}; 0 = any free port)")
     p.add_argument("--open", dest="view_open", action="store_true", help="open the page in the system browser")
     p.add_argument(f"--{prefix}stream", dest="view_stream", choices=[*STREAMS, "auto"], default="auto",
-                   help="features, both (features and camera images), frames (images only, the host detects); "
-                        "auto: both if the device streams images")
+                   help="features, both (features and camera images), frames (images only, the host detects), "
+                        "detect (both; the host detects, the device's features drawn as the reference: on the "
+                        "emulator the ground truth); auto: both if the device streams images")
     p.add_argument("--record-video", metavar="FILE", help="also write the eye images with overlays (.mp4 or .png: "
                                                           "animated PNG)")
 

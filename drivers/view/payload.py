@@ -6,7 +6,7 @@ top-left corner as the subject sees it, x right, y down). Non-finite numbers bec
 
 Image message (binary WebSocket frame): ``<I`` header length, the UTF-8 JSON header (eye, frame_id,
 roi_x, roi_y, width, height, device_us, record: the features of that exposure
-for the overlay, or null), then the image encoded as JPEG.
+for the overlay, or null; truth: the device's record when the host detected, or null), then the image encoded as JPEG.
 """
 
 from __future__ import annotations
@@ -63,9 +63,10 @@ def xy(point: np.ndarray | tuple[float, float] | None) -> list[float | None] | N
 
 
 def image_message(eye: Eye, frame_id: int, roi_xy: tuple[int, int], pixels: np.ndarray, device_us: int,
-                  record: dict | None = None) -> bytes:
+                  record: dict | None = None, truth: dict | None = None) -> bytes:
     """The binary message of one camera image (see the module docstring); MONO16 is scaled to 8 bits. `record`:
-    the eye's features of the same exposure (`eye_record`), drawn over this image."""
+    the eye's features of the same exposure (`eye_record`), drawn over this image; `truth`: the device's own record
+    of it when the host detected `record` (on the emulator: the ground truth)."""
     if pixels.dtype != np.uint8:
         pixels = (pixels >> 8).astype(np.uint8)
     ok, jpeg = cv2.imencode(".jpg", pixels, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
@@ -73,7 +74,7 @@ def image_message(eye: Eye, frame_id: int, roi_xy: tuple[int, int], pixels: np.n
         raise ValueError("JPEG encoding failed")
     header = json.dumps({"eye": Eye(eye).name.lower(), "frame_id": int(frame_id), "roi_x": int(roi_xy[0]),
                          "roi_y": int(roi_xy[1]), "width": int(pixels.shape[1]), "height": int(pixels.shape[0]),
-                         "device_us": int(device_us), "record": record}, allow_nan=False).encode()
+                         "device_us": int(device_us), "record": record, "truth": truth}, allow_nan=False).encode()
     return HEADER_LENGTH.pack(len(header)) + header + jpeg.tobytes()
 
 

@@ -2,8 +2,9 @@
 
 `ViewSession(url, publish, ...)` connects to `url` (any link of `drivers.links`), handshakes, syncs the
 clocks, configures the stream (`stream`: "features"; "both" = features and camera images; "frames" = images
-only, the host detects the features with `drivers.frames.FrameReader`; "auto" = both if the device streams
-images) and starts it. It publishes dicts (`drivers.view.payload`) and binary image messages through
+only, the host detects the features with `drivers.frames.FrameReader`; "detect" = both streamed, the host
+detects and the device's FEATURES are drawn as the reference, on the emulator the ground truth; "auto" = both if
+the device streams images) and starts it. It publishes dicts (`drivers.view.payload`) and binary image messages through
 `publish` (thread-safe, e.g. `Hub.publish_threadsafe`): "hello" (the device), "state" (twice a second and on
 every change), "tick" (`tick_hz` times a second: the samples since the last tick, the last record of each eye,
 gaze, target and health), images (at most `max_image_hz` per eye), "script", "calibration".
@@ -38,7 +39,9 @@ from drivers.view.stats import StreamStats
 from drivers.wire import ReceivedImage, Sample, host_now_us
 from protocols.enums import Capability, Eye, StreamSelect
 
-STREAMS = {"features": StreamSelect.FEATURES, "both": StreamSelect.BOTH, "frames": StreamSelect.FRAMES}
+STREAMS = {"features": StreamSelect.FEATURES, "both": StreamSelect.BOTH, "frames": StreamSelect.FRAMES,
+           "detect": StreamSelect.BOTH}
+HOST_DETECTS = ("frames", "detect")  # modes in which the host finds the features in the images
 MAX_TICK_SAMPLES = 1_000  # samples per tick sent to the page (beyond: every k-th)
 COMMANDS = 16
 MAX_RECORDS = 256  # recent eye records kept to draw over the images of the same exposure
@@ -50,7 +53,7 @@ class ViewSession:
 
     def __init__(self, url: str, publish: Callable[[dict | bytes], None], *, geometry: TrackerGeometry | None = None,
                  stream: str = "auto", rate_hz: int | None = None, timeout: float = 2.0, autostart: bool = True,
-                 tick_hz: float = 30.0, max_image_hz: float = 60.0, retry_s: float = 0.5, oracle=None,
+                 tick_hz: float = 30.0, max_image_hz: float = 120.0, retry_s: float = 0.5, oracle=None,
                  recorder=None, plan_timing: dict | None = None) -> None:
         if stream not in (*STREAMS, "auto"):
             raise ValueError(f"stream must be one of {(*STREAMS, 'auto')}, got {stream!r}")
@@ -145,17 +148,20 @@ class ViewSession:
         self.stats.reset()
         self._publish_state()
 
+    def _mode(self) -> str:
+        """The stream mode, "auto" resolved."""
+        if self.stream_mode != "auto":
+            return self.stream_mode
+        return "both" if Capability.FRAMES in self.tracker.info.capabilities else "features"
+
     def _stream_select(self) -> StreamSelect:
-        mode = self.stream_mode
-        if mode == "auto":
-            mode = "both" if Capability.FRAMES in self.tracker.info.capabilities else "features"
-        return STREAMS[mode]
+        return STREAMS[self._mode()]
 
     def _configure(self, leds: int | None = None, eyes=None) -> None:
         """CONFIGURE: the view's stream; LEDs and eyes as given (a calibration's) or the device's defaults."""
-        cfg = self.tracker.configure(leds=leds, rate_hz=self.rate_hz, eyes=eyes, stream=self._stream_select())
+        self.tracker.configure(leds=leds, rate_hz=self.rate_hz, eyes=eyes, stream=self._stream_select())
         self.reader = None
-        if cfg.stream == StreamSelect.FRAMES:
+        if self._mode() in HOST_DETECTS:
             leds_xy = self.geometry.leds[:, :2] if self.geometry is not None else None
             self.reader = FrameReader(self.tracker, led_xy_mm=leds_xy)
 
@@ -169,11 +175,12 @@ class ViewSession:
         self._pending: list[list] = []
         self._last: dict[str, dict] = {}
         self._records: dict[tuple[int, int], dict] = {}  # (frame id, eye) -> record: the overlay of its image
+        self._truths: dict[tuple[int, int], dict] = {}  # (frame id, eye) -> the device's record ("detect" mode)
         self._last_tick = self._last_status = 0.0
         self._last_image: dict[int, float] = {}
         self._last_sample_at = time.monotonic()
         self._gaze = None
-        self._device_status: dict[str, int] = {}
+        self.device_status: dict[str, int] = {}
 
     # --- commands -----------------------------------------------------------------------------
     def _commands(self) -> None:
@@ -237,7 +244,7 @@ class ViewSession:
         plan = Plan.default(geometry.screen, **self.plan_timing)
         if tracker.streaming:
             tracker.stop()
-        frames = self._stream_select() == StreamSelect.FRAMES
+        frames = self._mode() in HOST_DETECTS
         try:
             result = calibrate(tracker, geometry, method, plan, rate_hz=self.rate_hz, frames=frames)
         except (LinkError, TrackerTimeoutError):
@@ -308,6 +315,8 @@ class ViewSession:
             images = list(wire.images)
             wire.images.clear()
         else:
+            self._truth(list(wire.samples))
+            wire.samples.clear()
             samples, images = [], []
             while True:
                 try:
@@ -318,6 +327,15 @@ class ViewSession:
         newest = {got.image.eye: got for got in images}
         self.counters["images_skipped"] += len(images) - len(newest)
         return samples, list(newest.values())
+
+    def _truth(self, samples: list[Sample]) -> None:
+        """The device's own FEATURES while the host detects ("detect" mode): drawn as the reference (on the
+        emulator, the ground truth of the rendered images)."""
+        for sample in samples:
+            for record in sample.eyes:
+                self._truths[(sample.frame_id, int(record.eye))] = {**eye_record(record), "frame_id": sample.frame_id}
+        while len(self._truths) > MAX_RECORDS:
+            del self._truths[next(iter(self._truths))]
 
     def _process(self, samples: list[Sample]) -> None:
         """Stats, gaze and the rows of the confidence chart of received samples."""
@@ -364,7 +382,7 @@ class ViewSession:
         image = got.image
         record = self._records.get((image.frame_id, eye))
         self.publish(image_message(image.eye, image.frame_id, (image.roi_x, image.roi_y), image.pixels,
-                                   got.device_us, record))
+                                   got.device_us, record, self._truths.get((image.frame_id, eye))))
         if self.recorder is not None:
             self.recorder.image(image, record)
 
@@ -378,7 +396,7 @@ class ViewSession:
 
     def _poll_status(self) -> None:
         status = self.tracker.status()
-        self._device_status = {"samples_dropped": status.samples_dropped, "frames_dropped": status.frames_dropped,
+        self.device_status = {"samples_dropped": status.samples_dropped, "frames_dropped": status.frames_dropped,
                                "samples_sent": status.samples_sent, "frames_sent": status.frames_sent}
         self._last_status = time.monotonic()
 
@@ -394,7 +412,7 @@ class ViewSession:
         host = self.tracker.stats if self.tracker is not None else None
         p50, p99 = self.stats.latency_ms()
         stats = {"rate_hz": round(self.stats.rate_hz(host_now_us()), 1), "latency_p50_ms": number(p50 or np.nan, 2),
-                 "latency_p99_ms": number(p99 or np.nan, 2), **self._device_status, **self.counters}
+                 "latency_p99_ms": number(p99 or np.nan, 2), **self.device_status, **self.counters}
         if host is not None:
             stats |= {k: getattr(host, k) for k in ("lost_frames", "crc_errors", "samples_overflowed",
                                                    "images_incomplete", "images_overflowed", "images")}
@@ -410,7 +428,7 @@ class ViewSession:
         self.publish({"type": "hello", "url": self.url, "model": info.model, "firmware": info.firmware_version,
                       "sensor": [info.camera_width, info.camera_height], "rate_hz": info.sample_rate_hz,
                       "leds": info.led_count, "capabilities": [c.name for c in Capability if c in info.capabilities],
-                      "stream": self._stream_select().name.lower(), "screen": screen,
+                      "stream": self._mode(), "screen": screen,
                       "blink": self.oracle is not None})
 
     def _publish_state(self) -> None:

@@ -91,7 +91,23 @@ def make_runner(opts: DeviceOptions, args: argparse.Namespace):
     return LinkRunner(build_device(opts), make_link(args.link, args.host, args.port))
 
 
-def start_view(url: str, opts: DeviceOptions, args: argparse.Namespace) -> tuple:
+class ViewBlink:
+    """--view: lets the page close the simulated subject's eyes (the native protocol has no blink command, so only a
+    view in this process can). The blink starts beyond the features the camera has already prepared
+    (`camera.PREPARE_S`), so the runner's thread picks it up from the subject without being interrupted."""
+
+    LEAD_US = 40_000
+
+    def __init__(self, core) -> None:
+        self.core = core
+
+    def blink(self, duration_s: float) -> None:
+        """Close the eyes for `duration_s` seconds, starting in `LEAD_US`."""
+        start = self.core.clock.now_us() + self.LEAD_US
+        self.core.subject.blinks._intervals.append((start, start + round(duration_s * 1e6)))
+
+
+def start_view(url: str, opts: DeviceOptions, args: argparse.Namespace, core=None) -> tuple:
     """--view: the live page (drivers.view), a host on the device's `url` like any other; return (close, server).
 
     The host package is imported only here: the emulator does not depend on it (DESIGN.md).
@@ -109,7 +125,7 @@ def start_view(url: str, opts: DeviceOptions, args: argparse.Namespace) -> tuple
                                                      Path(tempfile.mkdtemp(prefix="eyehil-view-")) / "geometry.toml")
     view_args = argparse.Namespace(view_host="127.0.0.1", view_port=args.view_port, view_open=args.view_open,
                                    view_stream="auto", record_video=args.record_video)
-    return close_view, serve(url, view_args, str(geometry))
+    return close_view, serve(url, view_args, str(geometry), oracle=None if core is None else ViewBlink(core))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -125,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
         with make_runner(opts, args) as runner, contextlib.ExitStack() as view:
             print(f"url: {runner.url}", flush=True)
             if args.view:
-                view.callback(*start_view(runner.url, opts, args))
+                view.callback(*start_view(runner.url, opts, args, getattr(runner, "core", None)))
             print(f"eyehil emulate: {opts.mode} device, scene {opts.scene}, eyes {opts.eyes}[{opts.eye}], "
                   f"script {opts.script}, {opts.clock} clock; Ctrl-C stops", flush=True)
             with contextlib.suppress(KeyboardInterrupt):

@@ -150,3 +150,62 @@ def test_a_closed_device_shows_disconnected_and_the_page_reconnects(browser, geo
             page.close()
     finally:
         runner.close()
+
+
+def test_host_detection_lies_within_2_px_of_the_ground_truth_the_device_sent(browser, device, geometry_file):
+    geometry = load_geometry(geometry_file()).geometry
+    with ViewServer(device.url, geometry=geometry, stream="detect") as view:
+        page = browser.new_page()
+        page.goto(view.address)
+        ready = "(o => o && o.truth && o.pupil && o.source === 'image')(window.eyehilView.overlay.right)"
+        page.wait_for_function(ready, timeout=WAIT_MS)
+        overlay = page.evaluate("window.eyehilView.overlay.right")
+        assert page.evaluate("window.eyehilView.hello.stream") == "detect"
+        page.close()
+    detected, truth = overlay["pupil"], overlay["truth"]
+    assert abs(detected["x"] - truth["x"]) <= 2 and abs(detected["y"] - truth["y"]) <= 2
+    assert abs(truth["x"] - (truth["sensor_x"] - overlay["origin"][0])) < 1e-6
+
+
+def test_blink_from_the_page_closes_the_emulated_eyes(browser, device, geometry_file):
+    from emulator.device.cli import ViewBlink
+
+    geometry = load_geometry(geometry_file()).geometry
+    with ViewServer(device.url, geometry=geometry, oracle=ViewBlink(device.core)) as view:
+        page = browser.new_page()
+        page.goto(view.address)
+        page.wait_for_function("window.eyehilView.eyes.right.tickRecord && window.eyehilView.streaming",
+                               timeout=WAIT_MS)
+        assert not page.evaluate("window.eyehilView.eyes.right.tickRecord.blink")
+        assert page.is_enabled("#blink")
+        page.click("#blink")
+        page.wait_for_function("window.eyehilView.eyes.right.tickRecord.blink", timeout=WAIT_MS)
+        page.wait_for_function("!window.eyehilView.eyes.right.tickRecord.blink", timeout=WAIT_MS)  # and open again
+        page.close()
+
+
+def test_blink_is_refused_without_an_emulator_in_process(page):
+    page.wait_for_function("window.eyehilView.hello !== null", timeout=WAIT_MS)
+    assert not page.is_enabled("#blink")
+
+
+def test_blignaut_calibration_on_a_binocular_device(browser, geometry_file):
+    runner = start_device("blignaut2014")
+    geometry = load_geometry(geometry_file("blignaut2014")).geometry
+    try:
+        with ViewServer(runner.url, geometry=geometry, plan_timing={"settle_s": 0.4, "collect_s": 0.15}) as view:
+            page = browser.new_page()
+            page.goto(view.address)
+            page.wait_for_function("window.eyehilView.overlay.right && window.eyehilView.overlay.left",
+                                   timeout=WAIT_MS)
+            page.select_option("#method", "blignaut")
+            page.click("#calibrate")
+            page.wait_for_function("window.eyehilView.calibrating === 'blignaut'", timeout=WAIT_MS)
+            page.wait_for_function("window.eyehilView.calibration !== null", timeout=WAIT_MS)
+            calibration = page.evaluate("window.eyehilView.calibration")
+            page.wait_for_function("window.eyehilView.streaming && window.eyehilView.gaze !== null", timeout=WAIT_MS)
+            page.close()
+    finally:
+        runner.close()
+    assert calibration["ok"] and calibration["method"] == "blignaut", calibration["error"]
+    assert len(calibration["points"]) == 4 and all(p["error_deg"] < 1.5 for p in calibration["points"])

@@ -123,6 +123,26 @@ function drawEye(eye) {
     $("src-" + eye).textContent = `rendering of the features, frame ${record.frame_id}`;
   }
   drawOverlay(ctx, eye, record, origin, fresh);
+  if (fresh && e.header.truth) drawTruth(ctx, eye, e.header.truth, origin);
+}
+
+function drawTruth(ctx, eye, t, origin) {
+  // The device's own features of the exposure when the host detected (on the emulator: the ground truth).
+  const overlay = view.overlay[eye];
+  ctx.save(); ctx.strokeStyle = "#f3f"; ctx.setLineDash([3, 3]); ctx.lineWidth = 1;
+  if (t.detected && t.x !== null) {
+    const x = t.x - origin[0], y = t.y - origin[1];
+    ctx.beginPath(); ctx.ellipse(x, y, t.a / 2, t.b / 2, (t.angle || 0) * Math.PI / 180, 0, 2 * Math.PI); ctx.stroke();
+    overlay.truth = { x: x, y: y, sensor_x: t.x, sensor_y: t.y };
+  }
+  ctx.setLineDash([]);
+  for (const g of t.glints) {
+    const x = g.x - origin[0], y = g.y - origin[1];
+    ctx.beginPath(); ctx.moveTo(x - 3, y - 3); ctx.lineTo(x + 3, y + 3); ctx.moveTo(x + 3, y - 3); ctx.lineTo(x - 3, y + 3);
+    ctx.stroke();
+  }
+  ctx.fillStyle = "#f3f"; ctx.font = "11px sans-serif"; ctx.fillText("dashed: device features (ground truth)", 6, ctx.canvas.height - 6);
+  ctx.restore();
 }
 
 function featureWindow(e, record, canvas) {
@@ -150,7 +170,7 @@ function drawFeatures(ctx, r, origin, canvas) {
 
 function drawOverlay(ctx, eye, r, origin, fromImage) {
   const overlay = { frame_id: r ? r.frame_id : null, origin: origin, scale: 1, source: fromImage ? "image" : "features",
-                    width: ctx.canvas.width, height: ctx.canvas.height, pupil: null, glints: [] };
+                    width: ctx.canvas.width, height: ctx.canvas.height, pupil: null, glints: [], truth: null };
   view.overlay[eye] = overlay;
   if (!r) return;
   ctx.lineWidth = 1.5;
