@@ -52,7 +52,7 @@ DRAWN = """() => {
   if (!o || o.source !== "image" || !o.pupil) return null;
   const c = document.getElementById("eye-right"), d = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
   let n = 0, sx = 0, sy = 0;
-  for (let y = 0; y < c.height; y++) for (let x = 0; x < c.width; x++) {
+  for (let y = 20; y < c.height; y++) for (let x = 0; x < c.width; x++) {  // below the label box
     const i = 4 * (y * c.width + x);
     if (d[i] < 45 && d[i + 1] < 45 && d[i + 2] < 45) { n++; sx += x; sy += y; }
   }

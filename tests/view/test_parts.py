@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import concurrent.futures
 import json
 
 import cv2
@@ -23,6 +24,12 @@ RECORD = EyeFeatures(Eye.RIGHT, PupilFlags.DETECTED, 200.5, 150.25, 30.0, 28.0, 
                      (Glint(0, 210.0, 152.0), Glint(1, 0.0, 0.0, GlintFlags(0))))
 
 
+def run_async(scenario):
+    """Run a coroutine function on a fresh loop in its own thread (Playwright's sync API may own this one's)."""
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        return pool.submit(asyncio.run, scenario()).result()
+
+
 def test_a_page_that_never_reads_loses_its_oldest_messages_and_memory_stays_bounded():
     async def scenario():
         hub = Hub(asyncio.get_running_loop())
@@ -33,7 +40,7 @@ def test_a_page_that_never_reads_loses_its_oldest_messages_and_memory_stays_boun
             if i % 10 == 9:
                 got += await reading.get_all()
         return hub, stalled, reading, got
-    hub, stalled, reading, got = asyncio.run(scenario())
+    hub, stalled, reading, got = run_async(scenario)
     assert len(stalled.queue) == CLIENT_QUEUE and stalled.dropped == 1000 - CLIENT_QUEUE
     assert [m["i"] for m in stalled.queue] == list(range(1000 - CLIENT_QUEUE, 1000))  # the newest kept
     assert len(got) == 1000 and reading.dropped == 0
@@ -57,7 +64,7 @@ def test_sticky_messages_reach_a_late_page():
         hub.publish({"type": "hello", "model": "x"})
         hub.publish({"type": "tick", "stats": {}})
         return await hub.attach().get_all()
-    assert [m["type"] for m in asyncio.run(scenario())] == ["hello"]
+    assert [m["type"] for m in run_async(scenario)] == ["hello"]
 
 
 @pytest.mark.parametrize("name", ["fixations", "pursuit", "grid"])

@@ -11,7 +11,7 @@ from emulator.device.tcp_link import TcpLink
 CHROMIUM = os.environ.get("EYEHIL_CHROMIUM", "/usr/bin/chromium")
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update", "--disable-sync", "--no-first-run"]
-WAIT_MS = 60_000  # generous: the machine is shared; every wait is on a condition
+WAIT_MS = 240_000  # generous: the machine is shared; every wait is on a condition
 
 
 def start_device(scene: str = "guestrin2006", port: int = 0, **options) -> LinkRunner:

@@ -6,7 +6,7 @@
 "use strict";
 
 const HISTORY_S = 10;
-const TRAIL = 60;
+const TRAIL = 60, TRAIL_STEP_S = 0.05;   // 3 s of gaze
 const EYES = ["right", "left"];
 const view = window.eyehilView = {
   socket: "closed", connected: false, streaming: false, calibrating: null, hello: null, state: null,
@@ -68,8 +68,9 @@ function onTick(m) {
   let cut = 0;
   while (cut < view.history.length && view.history[cut][0] < last - HISTORY_S) cut++;
   if (cut) view.history.splice(0, cut);
-  for (const row of m.samples) {
-    if (row[3] !== null) { view.trail.push([row[3], row[4]]); }
+  for (const row of m.samples) {  // the trail: a gaze point every TRAIL_STEP_S of device time
+    const lastAt = view.trail.length ? view.trail[view.trail.length - 1][2] : -Infinity;
+    if (row[3] !== null && (row[0] - lastAt >= TRAIL_STEP_S || row[0] < lastAt)) view.trail.push([row[3], row[4], row[0]]);
   }
   if (view.trail.length > TRAIL) view.trail.splice(0, view.trail.length - TRAIL);
   view.gaze = m.gaze; view.target = m.target;
@@ -188,7 +189,8 @@ function drawOverlay(ctx, eye, r, origin, fromImage) {
     ctx.fillStyle = "#fc3"; ctx.fillText("LED " + g.led, x + 6, y - 8 - 11 * g.led);
     overlay.glints.push({ led: g.led, x: x, y: y });
   }
-  ctx.fillStyle = r.blink ? "#f66" : "#ccc";
+  ctx.fillStyle = "rgba(0, 0, 0, 0.6)"; ctx.fillRect(0, 0, 112, 19);
+  ctx.fillStyle = r.blink ? "#f66" : "#ddd";
   ctx.fillText(r.blink ? "blink" : `confidence ${r.confidence === null ? "-" : r.confidence.toFixed(2)}`, 6, 14);
 }
 
@@ -279,14 +281,14 @@ function showStats() {
   const s = view.stats, ms = (v) => (v === null || v === undefined ? "-" : v.toFixed(1) + " ms");
   $("rate").textContent = s.rate_hz.toFixed(0) + " Hz";
   $("latency").textContent = ms(s.latency_p50_ms) + " / " + ms(s.latency_p99_ms);
-  const lost = (s.lost_frames || 0) + (s.images_incomplete || 0);
-  const dropped = (s.samples_dropped || 0) + (s.frames_dropped || 0) + (s.samples_overflowed || 0) +
-    (s.images_overflowed || 0) + (s.view_dropped || 0);
-  $("lost").textContent = String(lost);
-  $("dropped").textContent = String(dropped);
-  $("dropped").title = `device: ${s.samples_dropped || 0} samples, ${s.frames_dropped || 0} images; ` +
-    `host: ${s.samples_overflowed || 0} samples, ${s.images_overflowed || 0} images; view: ${s.view_dropped || 0} ` +
-    `messages, ${s.images_skipped || 0} images not shown`;
+  // lost: frames the link lost (sequence gaps, incomplete images); dropped: samples the device or the host discarded;
+  // images not sent: what the device skips by design when it cannot render every exposure (STATUS frames_dropped)
+  $("lost").textContent = String((s.lost_frames || 0) + (s.images_incomplete || 0));
+  $("dropped").textContent = String((s.samples_dropped || 0) + (s.samples_overflowed || 0));
+  $("dropped").title = `device: ${s.samples_dropped || 0}; host: ${s.samples_overflowed || 0}`;
+  $("skipped").textContent = String(s.frames_dropped || 0);
+  $("view-dropped").textContent = String(s.view_dropped || 0);
+  $("view-dropped").title = `${s.images_skipped || 0} images received but not shown (newer ones came first)`;
 }
 
 function showCalibration() {
