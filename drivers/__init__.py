@@ -6,7 +6,8 @@
 - `calibration` (through the device), `features` (samples -> estimator arrays), `setup_file` (the tracker's
   geometry file), `recording` (docs/recording.md), `cli` (eyehil info / stream / calibrate / record);
 - `gaze`: the estimators (pure numerics); `detect` (+ `detect_ellipse`, `detect_glints`): features from
-  camera frames with OpenCV; `frames`: the frames-only mode (FRAME_CHUNKs -> images -> detected samples).
+  camera frames with OpenCV; `frames`: the frames-only mode (FRAME_CHUNKs -> images -> detected samples);
+- `view`: the live web view (eyehil view; optional extra), a host like any other.
 """
 
 from drivers.client import Tracker, open_tracker
