@@ -46,6 +46,7 @@ MAX_TICK_SAMPLES = 1_000  # samples per tick sent to the page (beyond: every k-t
 COMMANDS = 16
 MAX_RECORDS = 256  # recent eye records kept to draw over the images of the same exposure
 STATUS_EVERY_S = 1.0
+MAX_READS = 32  # link reads (of up to 64 kB) per step before the samples are processed
 
 
 class ViewSession:
@@ -290,7 +291,9 @@ class ViewSession:
                 self._poll_status()
             self._publish_tick_if_due()
             return
-        tracker.wire.pump(0.01)
+        reads = 0
+        while tracker.wire.pump(0.01 if reads == 0 else 0) and reads < MAX_READS:  # what the link holds, bounded
+            reads += 1
         samples, images = self._take()
         now = time.monotonic()
         if samples:
