@@ -27,6 +27,7 @@ from drivers.view.session import ViewSession
 
 STATIC = Path(__file__).with_name("static")
 MAX_COMMAND_BYTES = 4096
+MAX_PAGES = 16  # WebSocket connections at a time (each has a bounded queue)
 PAGE_COMMANDS = ("start", "stop", "script", "calibrate", "blink")
 
 
@@ -119,7 +120,9 @@ class ViewServer:
             "host": {} if session is None or session.tracker is None else session.tracker.stats.as_dict(),
         })
 
-    async def _websocket(self, request: web.Request) -> web.WebSocketResponse:
+    async def _websocket(self, request: web.Request) -> web.StreamResponse:
+        if len(self.hub.clients) >= MAX_PAGES:
+            return web.Response(status=503, text=f"at most {MAX_PAGES} pages at a time")
         ws = web.WebSocketResponse(heartbeat=10.0, max_msg_size=MAX_COMMAND_BYTES)
         await ws.prepare(request)
         client = self.hub.attach()

@@ -27,7 +27,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from drivers.calibration import Plan, Result, calibrate, screen_to_stimulus
+from drivers.calibration import METHODS, Plan, Result, calibrate, screen_to_stimulus
 from drivers.errors import LinkError, TrackerError, TrackerTimeoutError
 from drivers.features import binocular_samples, eye_samples
 from drivers.frames import FrameReader
@@ -237,6 +237,8 @@ class ViewSession:
 
     # --- calibration --------------------------------------------------------------------------
     def _calibrate(self, method: str) -> None:
+        if method not in METHODS:
+            raise ValueError(f"calibration method must be one of {METHODS}")
         self._screen_size()
         self.script, self.calibrating = None, method
         self.publish({"type": "script", "name": "none", "points": []})

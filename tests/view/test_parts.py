@@ -7,14 +7,17 @@ import asyncio
 import concurrent.futures
 import json
 
+import aiohttp
 import cv2
 import numpy as np
 import pytest
 
+from drivers.setup_file import load_geometry
 from drivers.view.hub import CLIENT_QUEUE, INBOX, Hub
 from drivers.view.overlay import draw_overlay, features_panel
 from drivers.view.payload import HEADER_LENGTH, eye_record, image_message
 from drivers.view.scripts import GazeScript
+from drivers.view.server import MAX_COMMAND_BYTES, ViewServer
 from drivers.view.video import VideoRecorder
 from protocols.enums import Eye, GlintFlags, PupilFlags
 from protocols.images import Image
@@ -144,3 +147,35 @@ def test_eyehil_view_serves_a_loop_device_for_a_while(capsys, tmp_path):
     out = capsys.readouterr().out
     assert "view: http://127.0.0.1:" in out and f"video: {video}" in out
     assert video.stat().st_size > 0
+
+
+def test_hostile_page_messages_are_ignored_or_refused_and_the_view_goes_on(geometry_file):
+
+    async def hostile(address: str) -> tuple[list[dict], dict, int]:
+        async with aiohttp.ClientSession() as http:
+            async with http.ws_connect(address + "ws") as ws:
+                for junk in ("not json", "[1, 2]", '{"cmd": 5}', '{"cmd": "fps", "value": 1e300}',
+                             '{"cmd": "format-disk"}', '{"cmd": "blink"}',
+                             '{"cmd": "script", "name": "' + "x" * 1000 + '"}'):
+                    await ws.send_str(junk)
+                states = []
+                while not any("unknown script" in (s.get("error") or "") for s in states):
+                    message = await ws.receive(timeout=60)
+                    if message.type == aiohttp.WSMsgType.TEXT and json.loads(message.data)["type"] == "state":
+                        states.append(json.loads(message.data))
+            async with http.ws_connect(address + "ws") as ws:  # too long: the server closes this socket
+                await ws.send_str('{"cmd": "stop", "pad": "' + "x" * MAX_COMMAND_BYTES + '"}')
+                while (await ws.receive(timeout=60)).type not in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED,
+                                                                  aiohttp.WSMsgType.ERROR):
+                    pass
+                code = ws.close_code
+            async with http.get(address + "stats") as response:
+                return states, await response.json(), code
+
+    geometry = load_geometry(geometry_file()).geometry
+    with ViewServer("loop://?scene=guestrin2006", geometry=geometry) as view:
+        states, stats, code = run_async(lambda: hostile(view.address))
+        assert view.session.tracker is not None and view.session.tracker.streaming  # the oversized "stop" never ran
+    assert any("cannot be made to blink" in (s.get("error") or "") for s in states)
+    assert code == aiohttp.WSCloseCode.MESSAGE_TOO_BIG
+    assert stats["page_fps"] == [] and stats["session"]["reconnects"] == 1
