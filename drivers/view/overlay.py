@@ -49,6 +49,7 @@ def draw_overlay(panel: np.ndarray, record: dict | None, origin: tuple[int, int]
     if not record:
         return panel
     label = "blink" if record.get("blink") else f"confidence {record['confidence'] or 0:.2f}"
+    panel[:19, :112] = (panel[:19, :112] * 0.4).astype(np.uint8)  # the page's dark label box
     cv2.putText(panel, label, (6, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4, TEXT, 1, cv2.LINE_AA)
     if record.get("detected") and record.get("x") is not None:
         x, y = record["x"] - origin[0], record["y"] - origin[1]
@@ -58,8 +59,8 @@ def draw_overlay(panel: np.ndarray, record: dict | None, origin: tuple[int, int]
     for g in record["glints"]:
         x, y = g["x"] - origin[0], g["y"] - origin[1]
         cv2.circle(panel, _fixed(x, y), 4 << SHIFT, GLINT, 1, cv2.LINE_AA, SHIFT)
-        cv2.putText(panel, f"LED {g['led']}", (round(x) + 6, round(y) - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.35, GLINT, 1,
-                    cv2.LINE_AA)
+        label_at = (round(x) + 6, round(y) - 8 - 11 * g["led"])
+        cv2.putText(panel, f"LED {g['led']}", label_at, cv2.FONT_HERSHEY_SIMPLEX, 0.35, GLINT, 1, cv2.LINE_AA)
     return panel
 
 
