@@ -25,26 +25,21 @@ import threading
 import time
 from collections.abc import Callable
 
-import numpy as np
-
 from drivers.calibration import METHODS, Plan, Result, calibrate, screen_to_stimulus
 from drivers.errors import LinkError, TrackerError, TrackerTimeoutError
-from drivers.features import binocular_samples, eye_samples
 from drivers.frames import FrameReader
 from drivers.gaze.geometry import TrackerGeometry
+from drivers.view.live import LiveStream, estimate_gaze
 from drivers.view.observed import ObservedTracker, open_observed
-from drivers.view.payload import confidence_of, eye_record, image_message, number, xy
+from drivers.view.payload import number, xy
 from drivers.view.scripts import NAMES, GazeScript
-from drivers.view.stats import StreamStats
-from drivers.wire import ReceivedImage, Sample, host_now_us
-from protocols.enums import Capability, Eye, StreamSelect
+from drivers.wire import ReceivedImage, Sample
+from protocols.enums import Capability, StreamSelect
 
 STREAMS = {"features": StreamSelect.FEATURES, "both": StreamSelect.BOTH, "frames": StreamSelect.FRAMES,
            "detect": StreamSelect.BOTH}
 HOST_DETECTS = ("frames", "detect")  # modes in which the host finds the features in the images
-MAX_TICK_SAMPLES = 1_000  # samples per tick sent to the page (beyond: every k-th)
 COMMANDS = 16
-MAX_RECORDS = 256  # recent eye records kept to draw over the images of the same exposure
 STATUS_EVERY_S = 1.0
 MAX_READS = 32  # link reads (of up to 64 kB) per step before the samples are processed
 
@@ -60,12 +55,12 @@ class ViewSession:
             raise ValueError(f"stream must be one of {(*STREAMS, 'auto')}, got {stream!r}")
         self.url, self.publish, self.geometry = url, publish, geometry
         self.stream_mode, self.rate_hz, self.timeout = stream, rate_hz, timeout
-        self.tick_s, self.image_s, self.retry_s = 1 / tick_hz, 1 / max_image_hz, retry_s
+        self.tick_s, self.retry_s = 1 / tick_hz, retry_s
         self.oracle, self.recorder, self.plan_timing = oracle, recorder, plan_timing or {}
         self.want_streaming = autostart
         self.commands: queue.Queue[dict] = queue.Queue(COMMANDS)
         self.tracker: ObservedTracker | None = None
-        self.stats = StreamStats()
+        self.live = LiveStream(max_image_hz)
         self.result: Result | None = None
         self.script: GazeScript | None = None
         self.error: str | None = None
@@ -73,7 +68,7 @@ class ViewSession:
         self.sync = None
         self.reader: FrameReader | None = None
         self._target: tuple[float, float] | None = None
-        self.counters = {"images_skipped": 0, "commands_refused": 0, "reconnects": 0}
+        self.counters = {"commands_refused": 0, "reconnects": 0}
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._reset_stream()
@@ -146,7 +141,7 @@ class ViewSession:
         if tracker is not None:
             tracker.close(stop=error is None)
         self.error, self.calibrating = error, None
-        self.stats.reset()
+        self.live.stats.reset()
         self._publish_state()
 
     def _mode(self) -> str:
@@ -173,14 +168,9 @@ class ViewSession:
         self._publish_state()
 
     def _reset_stream(self) -> None:
-        self._pending: list[list] = []
-        self._last: dict[str, dict] = {}
-        self._records: dict[tuple[int, int], dict] = {}  # (frame id, eye) -> record: the overlay of its image
-        self._truths: dict[tuple[int, int], dict] = {}  # (frame id, eye) -> the device's record ("detect" mode)
+        self.live.reset()
         self._last_tick = self._last_status = 0.0
-        self._last_image: dict[int, float] = {}
         self._last_sample_at = time.monotonic()
-        self._gaze = None
         self.device_status: dict[str, int] = {}
 
     # --- commands -----------------------------------------------------------------------------
@@ -320,7 +310,7 @@ class ViewSession:
             images = list(wire.images)
             wire.images.clear()
         else:
-            self._truth(list(wire.samples))
+            self.live.add_truth(list(wire.samples))
             wire.samples.clear()
             samples, images = [], []
             while True:
@@ -330,66 +320,19 @@ class ViewSession:
                     break
                 images.extend(self.reader.last_images)
         newest = {got.image.eye: got for got in images}
-        self.counters["images_skipped"] += len(images) - len(newest)
+        self.live.images_skipped += len(images) - len(newest)
         return samples, list(newest.values())
 
-    def _truth(self, samples: list[Sample]) -> None:
-        """The device's own FEATURES while the host detects ("detect" mode): drawn as the reference (on the
-        emulator, the ground truth of the rendered images)."""
-        for sample in samples:
-            for record in sample.eyes:
-                self._truths[(sample.frame_id, int(record.eye))] = {**eye_record(record), "frame_id": sample.frame_id}
-        while len(self._truths) > MAX_RECORDS:
-            del self._truths[next(iter(self._truths))]
-
     def _process(self, samples: list[Sample]) -> None:
-        """Stats, gaze and the rows of the confidence chart of received samples."""
-        gaze = self._estimate(samples)
-        for sample, g in zip(samples, gaze, strict=True):
-            latency = None
-            if self.sync is not None:
-                latency = (sample.host_us - self.sync.to_host_us(sample.device_us)) / 1e3
-            self.stats.add(sample.host_us, latency)
-            right, left = sample.eye(Eye.RIGHT), sample.eye(Eye.LEFT)
-            self._pending.append([round(sample.device_us / 1e6, 4), confidence_of(right), confidence_of(left),
-                                  *(xy(g) or [None, None])])
-            for record in (right, left):
-                if record is not None:
-                    encoded = {**eye_record(record), "frame_id": sample.frame_id}
-                    self._last[encoded["eye"]] = encoded
-                    self._records[(sample.frame_id, int(record.eye))] = encoded
-            while len(self._records) > MAX_RECORDS:
-                del self._records[next(iter(self._records))]
-        if len(gaze) and np.isfinite(gaze[-1]).all():
-            self._gaze = gaze[-1]
-        if len(self._pending) > 4 * MAX_TICK_SAMPLES:
-            del self._pending[: len(self._pending) - 4 * MAX_TICK_SAMPLES]
-
-    def _estimate(self, samples: list[Sample]) -> np.ndarray:
-        """Gaze (N, 2) STIMULUS mm of the samples with the last calibration (NaN without one or when unusable)."""
-        result = self.result
-        if result is None:
-            return np.full((len(samples), 2), np.nan)
-        try:
-            batch = eye_samples(samples, Eye.RIGHT) if result.method == "guestrin" else binocular_samples(samples)
-            gaze = result.calibration.estimate(batch)
-        except ValueError:  # the stream's LEDs or eyes no longer fit the calibration
-            return np.full((len(samples), 2), np.nan)
-        return screen_to_stimulus(self.geometry.screen, gaze)
+        screen = None if self.geometry is None else self.geometry.screen
+        self.live.add(samples, estimate_gaze(samples, self.result, screen), self.sync)
 
     def _image(self, got: ReceivedImage) -> None:
-        now = time.monotonic()
-        eye = int(got.image.eye)
-        if now - self._last_image.get(eye, -1.0) < self.image_s:
-            self.counters["images_skipped"] += 1
-            return
-        self._last_image[eye] = now
-        image = got.image
-        record = self._records.get((image.frame_id, eye))
-        self.publish(image_message(image.eye, image.frame_id, (image.roi_x, image.roi_y), image.pixels,
-                                   got.device_us, record, self._truths.get((image.frame_id, eye))))
-        if self.recorder is not None:
-            self.recorder.image(image, record)
+        shown = self.live.image(got, time.monotonic())
+        if shown is not None:
+            self.publish(shown[0])
+            if self.recorder is not None:
+                self.recorder.image(got.image, shown[1])
 
     def _run_script(self, now: float) -> None:
         if self.script is None:
@@ -411,18 +354,8 @@ class ViewSession:
         if now - self._last_tick < self.tick_s:
             return
         self._last_tick = now
-        rows, self._pending = self._pending, []
-        if len(rows) > MAX_TICK_SAMPLES:
-            rows = rows[:: -(-len(rows) // MAX_TICK_SAMPLES)]
         host = self.tracker.stats if self.tracker is not None else None
-        p50, p99 = self.stats.latency_ms()
-        stats = {"rate_hz": round(self.stats.rate_hz(host_now_us()), 1), "latency_p50_ms": number(p50 or np.nan, 2),
-                 "latency_p99_ms": number(p99 or np.nan, 2), **self.device_status, **self.counters}
-        if host is not None:
-            stats |= {k: getattr(host, k) for k in ("lost_frames", "crc_errors", "samples_overflowed",
-                                                   "images_incomplete", "images_overflowed", "images")}
-        message = {"type": "tick", "samples": rows, "eyes": dict(self._last), "gaze": xy(self._gaze),
-                   "target": xy(self._target), "stats": stats}
+        message = self.live.tick(host, {**self.device_status, **self.counters}, self._target)
         self.publish(message)
         if self.recorder is not None:
             self.recorder.tick(message)
