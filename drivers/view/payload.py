@@ -18,7 +18,10 @@ import struct
 import cv2
 import numpy as np
 
-from protocols.enums import Eye, GlintFlags, PupilFlags
+from drivers.calibration import Result, screen_to_stimulus
+from drivers.gaze.geometry import Screen
+from protocols.enums import Capability, Eye, GlintFlags, PupilFlags
+from protocols.replies import DeviceInfo
 from protocols.samples import EyeFeatures
 
 HEADER_LENGTH = struct.Struct("<I")
@@ -76,6 +79,26 @@ def image_message(eye: Eye, frame_id: int, roi_xy: tuple[int, int], pixels: np.n
                          "roi_y": int(roi_xy[1]), "width": int(pixels.shape[1]), "height": int(pixels.shape[0]),
                          "device_us": int(device_us), "record": record, "truth": truth}, allow_nan=False).encode()
     return HEADER_LENGTH.pack(len(header)) + header + jpeg.tobytes()
+
+
+def calibration_message(result: Result, screen: Screen) -> dict:
+    """The "calibration" message: validation targets, estimates (STIMULUS mm) and errors (deg) of `result`."""
+    targets = screen_to_stimulus(screen, result.plan.validation_mm)
+    estimates = screen_to_stimulus(screen, result.estimates_mm)
+    points = [{"target": xy(t), "estimate": xy(e), "error_deg": number(err)}
+              for t, e, err in zip(targets, estimates, result.errors_deg, strict=True)]
+    return {"type": "calibration", "method": result.method, "ok": True, "error": None,
+            "mean_error_deg": number(result.mean_error_deg), "points": points,
+            "calibration_targets": [xy(p) for p in screen_to_stimulus(screen, result.plan.calibration_mm)]}
+
+
+def hello_message(info: DeviceInfo, url: str, stream: str, screen: Screen | None, blink: bool) -> dict:
+    """The "hello" message: the device as DEVICE_INFO describes it, the stream mode, the screen size (mm)."""
+    return {"type": "hello", "url": url, "model": info.model, "firmware": info.firmware_version,
+            "sensor": [info.camera_width, info.camera_height], "rate_hz": info.sample_rate_hz,
+            "leds": info.led_count, "capabilities": [c.name for c in Capability if c in info.capabilities],
+            "stream": stream, "screen": None if screen is None else [float(v) for v in screen.size_mm],
+            "blink": blink}
 
 
 def dumps(message: dict) -> str:

@@ -25,13 +25,13 @@ import threading
 import time
 from collections.abc import Callable
 
-from drivers.calibration import METHODS, Plan, Result, calibrate, screen_to_stimulus
+from drivers.calibration import METHODS, Plan, Result, calibrate
 from drivers.errors import LinkError, TrackerError, TrackerTimeoutError
 from drivers.frames import FrameReader
 from drivers.gaze.geometry import TrackerGeometry
 from drivers.view.live import LiveStream, estimate_gaze
 from drivers.view.observed import ObservedTracker, open_observed
-from drivers.view.payload import number, xy
+from drivers.view.payload import calibration_message, hello_message, xy
 from drivers.view.scripts import NAMES, GazeScript
 from drivers.wire import ReceivedImage, Sample
 from protocols.enums import Capability, StreamSelect
@@ -249,24 +249,16 @@ class ViewSession:
             self.calibrating = None
         if result is not None:
             self.result = result
-            self.publish(self._calibration_message(result))
+            self.publish(calibration_message(result, self.geometry.screen))
         cfg = tracker.configuration
         self._configure(leds=cfg.leds, eyes=cfg.eyes)
         if self.want_streaming:
             self._start()
         self._publish_state()
 
-    def _calibration_message(self, result: Result) -> dict:
-        screen = self.geometry.screen
-        targets = screen_to_stimulus(screen, result.plan.validation_mm)
-        estimates = screen_to_stimulus(screen, result.estimates_mm)
-        points = [{"target": xy(t), "estimate": xy(e), "error_deg": number(err)}
-                  for t, e, err in zip(targets, estimates, result.errors_deg, strict=True)]
-        return {"type": "calibration", "method": result.method, "ok": True, "error": None,
-                "mean_error_deg": number(result.mean_error_deg), "points": points,
-                "calibration_targets": [xy(p) for p in screen_to_stimulus(screen, result.plan.calibration_mm)]}
-
     def _observed_sample(self, sample: Sample) -> None:
+        if self._stop.is_set():  # closing during a calibration: abandon it (the run loop disconnects)
+            raise LinkError("the view is closing")
         if self.calibrating:
             self._process([sample])
             self._publish_tick_if_due()
@@ -361,13 +353,8 @@ class ViewSession:
             self.recorder.tick(message)
 
     def _publish_hello(self) -> None:
-        info = self.tracker.info
-        screen = None if self.geometry is None else [float(v) for v in self.geometry.screen.size_mm]
-        self.publish({"type": "hello", "url": self.url, "model": info.model, "firmware": info.firmware_version,
-                      "sensor": [info.camera_width, info.camera_height], "rate_hz": info.sample_rate_hz,
-                      "leds": info.led_count, "capabilities": [c.name for c in Capability if c in info.capabilities],
-                      "stream": self._mode(), "screen": screen,
-                      "blink": self.oracle is not None})
+        screen = None if self.geometry is None else self.geometry.screen
+        self.publish(hello_message(self.tracker.info, self.url, self._mode(), screen, blink=self.oracle is not None))
 
     def _publish_state(self) -> None:
         tracker = self.tracker

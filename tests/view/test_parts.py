@@ -179,3 +179,19 @@ def test_hostile_page_messages_are_ignored_or_refused_and_the_view_goes_on(geome
     assert any("cannot be made to blink" in (s.get("error") or "") for s in states)
     assert code == aiohttp.WSCloseCode.MESSAGE_TOO_BIG
     assert stats["page_fps"] == [] and stats["session"]["reconnects"] == 1
+
+
+def test_the_live_state_is_bounded_and_a_tick_carries_at_most_max_tick_samples_rows():
+    from drivers.view.live import MAX_PENDING, MAX_RECORDS, MAX_TICK_SAMPLES, LiveStream
+    from drivers.wire import Sample
+
+    live = LiveStream()
+    samples = [Sample(i, i, 4000 * i, 4000 * i + 5000, (RECORD,)) for i in range(3 * MAX_PENDING)]
+    live.add(samples, np.full((len(samples), 2), np.nan), None)
+    assert len(live.records) == MAX_RECORDS and len(live.pending) == MAX_PENDING
+    assert (samples[-1].frame_id, 0) in live.records and (0, 0) not in live.records  # the newest kept
+    tick = live.tick(None, {}, (10.0, 20.0))
+    assert 0 < len(tick["samples"]) <= MAX_TICK_SAMPLES and live.pending == []
+    assert tick["eyes"]["right"]["frame_id"] == samples[-1].frame_id and tick["target"] == [10.0, 20.0]
+    assert tick["samples"][-1][1] == pytest.approx(0.9)  # confidence of the right eye; no left eye, no gaze
+    assert tick["samples"][-1][2:] == [None, None, None]
