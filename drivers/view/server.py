@@ -138,12 +138,16 @@ class ViewServer:
         return ws
 
     async def _send(self, ws: web.WebSocketResponse, client) -> None:
-        while not ws.closed:
-            for message in await client.get_all():
-                if isinstance(message, bytes):
-                    await ws.send_bytes(message)
-                else:
-                    await ws.send_str(dumps(message))
+        """Send the page its messages as they come; a page that went away ends this (its queue was bounded)."""
+        try:
+            while not ws.closed:
+                for message in await client.get_all():
+                    if isinstance(message, bytes):
+                        await ws.send_bytes(message)
+                    else:
+                        await ws.send_str(dumps(message))
+        except (ConnectionError, RuntimeError):  # closed under us
+            return
 
     def _command(self, page: int, text: str) -> None:
         """A page's command: checked, then queued for the session (malformed ones are ignored)."""
