@@ -2,9 +2,10 @@
 
 The session thread calls `publish_threadsafe`; messages land in a bounded inbox (`INBOX` deep) that the
 event loop drains into every client's queue (`CLIENT_QUEUE` deep). A page that reads slower than the
-device produces loses its oldest messages, counted in `Client.dropped` and `Hub.dropped`; memory never
-grows with a slow browser. Sticky messages (the last of each kind in `STICKY`) are replayed to a page
-that connects later, so it starts with the device's description, state and last calibration.
+device produces loses its oldest images and ticks first (state changes and calibrations go last), counted
+in `Client.dropped` and `Hub.dropped`; memory never grows with a slow browser. Sticky messages (the last
+of each kind in `STICKY`) are replayed to a page that connects later, so it starts with the device's
+description, state and last calibration.
 """
 
 from __future__ import annotations
@@ -21,6 +22,10 @@ STICKY = ("hello", "state", "calibration", "script")
 Message = dict | bytes
 
 
+def _sticky(message: Message) -> bool:
+    return isinstance(message, dict) and message.get("type") in STICKY
+
+
 class Client:
     """One page: its queue of messages to send and how many it lost."""
 
@@ -31,10 +36,11 @@ class Client:
         self.dropped = 0
 
     def put(self, message: Message) -> bool:
-        """Queue `message`; drop the oldest if full (return False then)."""
+        """Queue `message`; if full, drop the oldest image or tick (else the oldest message) and return False."""
         full = len(self.queue) >= self.maxsize
         if full:
-            self.queue.popleft()
+            victim = next((i for i, m in enumerate(self.queue) if not _sticky(m)), 0)
+            del self.queue[victim]
             self.dropped += 1
         self.queue.append(message)
         self.ready.set()

@@ -195,3 +195,18 @@ def test_the_live_state_is_bounded_and_a_tick_carries_at_most_max_tick_samples_r
     assert tick["eyes"]["right"]["frame_id"] == samples[-1].frame_id and tick["target"] == [10.0, 20.0]
     assert tick["samples"][-1][1] == pytest.approx(0.9)  # confidence of the right eye; no left eye, no gaze
     assert tick["samples"][-1][2:] == [None, None, None]
+
+
+def test_a_slow_page_loses_images_and_ticks_before_state_changes():
+    async def scenario():
+        hub = Hub(asyncio.get_running_loop())
+        page = hub.attach()
+        hub.publish({"type": "state", "calibrating": "guestrin"})
+        for i in range(3 * CLIENT_QUEUE):
+            hub.publish(b"image %d" % i if i % 2 else {"type": "tick", "i": i, "stats": {}})
+        hub.publish({"type": "calibration", "ok": True})
+        return list(page.queue)
+    queued = run_async(scenario)
+    assert len(queued) == CLIENT_QUEUE
+    assert queued[0] == {"type": "state", "calibrating": "guestrin"} and queued[-1]["type"] == "calibration"
+    assert queued[-2] == b"image %d" % (3 * CLIENT_QUEUE - 1)  # the newest of the rest kept
