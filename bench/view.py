@@ -1,7 +1,7 @@
 """Benchmark: the live view keeps up with the device; the frame rate the browser draws.
 
 The device runs in its own process (`eyehil emulate --link tcp --script demo`, guestrin2006: one eye, one
-320 x 240 crop per exposure); the view (`drivers.view.server.ViewServer`) runs in this process and a real
+320 x 240 crop per exposure); the view (`eyehil.drivers.view.server.ViewServer`) runs in this process and a real
 headless Chromium (Debian's, driven by Playwright) shows the page. Two streams, features and images both:
 250 Hz (the device renders what it can: at most one exposure's images at a time, the rest counted in its
 `frames_dropped` by design) and 60 Hz (an image for every exposure). Over `SECONDS` of wall time: samples per
@@ -19,9 +19,9 @@ from __future__ import annotations
 import time
 
 from bench.device import emulator
-from drivers.client import open_tracker
-from drivers.view.server import ViewServer
-from protocols.enums import StreamSelect
+from eyehil.drivers.client import open_tracker
+from eyehil.drivers.view.server import ViewServer
+from eyehil.protocols.enums import StreamSelect
 
 CHROMIUM = "/usr/bin/chromium"
 ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",

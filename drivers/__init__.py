@@ -10,6 +10,6 @@
 - `view`: the live web view (eyehil view; optional extra), a host like any other.
 """
 
-from drivers.client import Tracker, open_tracker
+from eyehil.drivers.client import Tracker, open_tracker
 
 __all__ = ["Tracker", "open_tracker"]

@@ -16,10 +16,10 @@ import signal
 import threading
 import webbrowser
 
-from drivers.errors import TrackerError
-from drivers.setup_file import load_geometry
-from drivers.view.server import ViewServer, wait_closed
-from drivers.view.session import STREAMS
+from eyehil.drivers.errors import TrackerError
+from eyehil.drivers.setup_file import load_geometry
+from eyehil.drivers.view.server import ViewServer, wait_closed
+from eyehil.drivers.view.session import STREAMS
 
 DEFAULT_PORT = 8765
 
@@ -58,7 +58,7 @@ def start_view(url: str, args: argparse.Namespace, geometry_path: str | None, **
     """Start the page server on `url` with the options of `add_view_options`; print its address (and open it)."""
     recorder = None
     if args.record_video:
-        from drivers.view.video import VideoRecorder
+        from eyehil.drivers.view.video import VideoRecorder
 
         recorder = VideoRecorder(args.record_video)
     geometry = load_geometry(geometry_path).geometry if geometry_path else None

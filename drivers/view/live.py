@@ -11,14 +11,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from drivers.calibration import Result, screen_to_stimulus
-from drivers.client import ClockSync
-from drivers.features import binocular_samples, eye_samples
-from drivers.gaze.geometry import Screen
-from drivers.view.payload import confidence_of, eye_record, image_message, number, xy
-from drivers.view.stats import StreamStats
-from drivers.wire import HostStats, ReceivedImage, Sample, host_now_us
-from protocols.enums import Eye
+from eyehil.drivers.calibration import Result, screen_to_stimulus
+from eyehil.drivers.client import ClockSync
+from eyehil.drivers.features import binocular_samples, eye_samples
+from eyehil.drivers.gaze.geometry import Screen
+from eyehil.drivers.view.payload import confidence_of, eye_record, image_message, number, xy
+from eyehil.drivers.view.stats import StreamStats
+from eyehil.drivers.wire import HostStats, ReceivedImage, Sample, host_now_us
+from eyehil.protocols.enums import Eye
 
 MAX_TICK_SAMPLES = 1_000  # chart rows per tick (beyond: every k-th)
 MAX_PENDING = 4 * MAX_TICK_SAMPLES  # chart rows kept between ticks

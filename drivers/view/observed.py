@@ -1,6 +1,6 @@
-"""`ObservedTracker`: a `drivers.client.Tracker` that reports every sample it hands out and every target it shows.
+"""`ObservedTracker`: a `eyehil.drivers.client.Tracker` that reports every sample it hands out and every target it shows.
 
-The view lets `drivers.calibration.calibrate` drive the device unchanged and still shows the samples and
+The view lets `eyehil.drivers.calibration.calibrate` drive the device unchanged and still shows the samples and
 the targets of the calibration live: `on_sample(sample)` runs for each sample `read_sample` returns,
 `on_target(target_id, x_mm, y_mm)` for each STIMULUS (STIMULUS mm: top-left origin, x right, y down).
 """
@@ -9,9 +9,9 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from drivers.client import Tracker
-from drivers.links import open_link
-from drivers.wire import Sample
+from eyehil.drivers.client import Tracker
+from eyehil.drivers.links import open_link
+from eyehil.drivers.wire import Sample
 
 
 class ObservedTracker(Tracker):
@@ -34,7 +34,7 @@ class ObservedTracker(Tracker):
 
 
 def open_observed(url: str, **kwargs) -> ObservedTracker:
-    """Open `url` (any scheme of `drivers.links`) and handshake, like `drivers.client.open_tracker`."""
+    """Open `url` (any scheme of `eyehil.drivers.links`) and handshake, like `eyehil.drivers.client.open_tracker`."""
     link = open_link(url, timeout=0.0)
     try:
         return ObservedTracker(link, url=url, **kwargs)

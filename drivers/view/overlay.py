@@ -1,7 +1,7 @@
 """The page's eye panel drawn with OpenCV (for `--record-video`): the camera image or a rendering of the features,
 with the pupil ellipse, its centre, the glints and their LED labels.
 
-Pure numpy/OpenCV, no I/O. Input records are `drivers.view.payload.eye_record` dicts (full-sensor px, OpenCV
+Pure numpy/OpenCV, no I/O. Input records are `eyehil.drivers.view.payload.eye_record` dicts (full-sensor px, OpenCV
 convention; ellipse axes are full lengths, angle in degrees from image +x toward +y); `origin` is the sensor
 pixel at the panel's top-left. Colours are those of `static/view.js`.
 """

@@ -18,11 +18,11 @@ import struct
 import cv2
 import numpy as np
 
-from drivers.calibration import Result, screen_to_stimulus
-from drivers.gaze.geometry import Screen
-from protocols.enums import Capability, Eye, GlintFlags, PupilFlags
-from protocols.replies import DeviceInfo
-from protocols.samples import EyeFeatures
+from eyehil.drivers.calibration import Result, screen_to_stimulus
+from eyehil.drivers.gaze.geometry import Screen
+from eyehil.protocols.enums import Capability, Eye, GlintFlags, PupilFlags
+from eyehil.protocols.replies import DeviceInfo
+from eyehil.protocols.samples import EyeFeatures
 
 HEADER_LENGTH = struct.Struct("<I")
 JPEG_QUALITY = 85

@@ -1,7 +1,7 @@
 """Host-side gaze scripts: where the view shows the target over time (sent to the emulator as STIMULUS).
 
 Positions are STIMULUS coordinates: mm from the screen's top-left corner as the subject sees it, x right,
-y down (`drivers.calibration.screen_to_stimulus` converts from geometry screen mm). Times are seconds
+y down (`eyehil.drivers.calibration.screen_to_stimulus` converts from geometry screen mm). Times are seconds
 since the script started (host clock). Pure functions of time; the session sends a new STIMULUS when
 `target_at` changes (fixations, grid) or every `step_s` (pursuit).
 

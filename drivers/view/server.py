@@ -4,11 +4,11 @@
         print(view.address)                                               # http://127.0.0.1:PORT/
 
 Routes: ``/`` the page (`static/index.html`), ``/static/*`` its script and style (shipped in the package,
-nothing from a CDN), ``/ws`` the WebSocket (server -> page: `drivers.view.payload` messages as JSON text and
+nothing from a CDN), ``/ws`` the WebSocket (server -> page: `eyehil.drivers.view.payload` messages as JSON text and
 camera images as binary; page -> server: JSON commands ``{"cmd": "start" | "stop" | "script" | "calibrate" |
 "blink" | "fps", ...}``), ``/stats`` JSON health of the view itself (pages connected, messages dropped, the
 frame rates the pages report). The server runs its own event loop on a thread; the device session
-(`drivers.view.session.ViewSession`) runs on another. Loopback by default: the page can drive the device.
+(`eyehil.drivers.view.session.ViewSession`) runs on another. Loopback by default: the page can drive the device.
 """
 
 from __future__ import annotations
@@ -21,9 +21,9 @@ from pathlib import Path
 
 from aiohttp import WSMsgType, web
 
-from drivers.view.hub import Hub
-from drivers.view.payload import dumps
-from drivers.view.session import ViewSession
+from eyehil.drivers.view.hub import Hub
+from eyehil.drivers.view.payload import dumps
+from eyehil.drivers.view.session import ViewSession
 
 STATIC = Path(__file__).with_name("static")
 MAX_COMMAND_BYTES = 4096

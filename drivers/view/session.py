@@ -1,21 +1,21 @@
 """The view's host: one thread that owns the tracker, streams, runs the page's commands and publishes.
 
-`ViewSession(url, publish, ...)` connects to `url` (any link of `drivers.links`), handshakes, syncs the
+`ViewSession(url, publish, ...)` connects to `url` (any link of `eyehil.drivers.links`), handshakes, syncs the
 clocks, configures the stream (`stream`: "features"; "both" = features and camera images; "frames" = images
-only, the host detects the features with `drivers.frames.FrameReader`; "detect" = both streamed, the host
+only, the host detects the features with `eyehil.drivers.frames.FrameReader`; "detect" = both streamed, the host
 detects and the device's FEATURES are drawn as the reference, on the emulator the ground truth; "auto" = both if
-the device streams images) and starts it. It publishes dicts (`drivers.view.payload`) and binary image messages through
+the device streams images) and starts it. It publishes dicts (`eyehil.drivers.view.payload`) and binary image messages through
 `publish` (thread-safe, e.g. `Hub.publish_threadsafe`): "hello" (the device), "state" (twice a second and on
 every change), "tick" (`tick_hz` times a second: the samples since the last tick, the last record of each eye,
 gaze, target and health), images (at most `max_image_hz` per eye), "script", "calibration".
 
 Commands (`submit`, bounded queue): start, stop, script (fixations | pursuit | grid | none), calibrate
-(guestrin | blignaut; `drivers.calibration.calibrate` through an `ObservedTracker`, so its samples and targets
+(guestrin | blignaut; `eyehil.drivers.calibration.calibrate` through an `ObservedTracker`, so its samples and targets
 show live), blink (only with an `oracle`: a device-side helper given in-process, e.g. by ``eyehil emulate
 --view``; the wire has no blink command). A link that fails or a device that stops answering makes the
 session "disconnected"; it reopens the URL every `retry_s` and resumes streaming when the device is back.
 Screen positions are STIMULUS mm (top-left origin, x right, y down); gaze estimates are converted from the
-geometry's screen mm with `drivers.calibration.screen_to_stimulus`.
+geometry's screen mm with `eyehil.drivers.calibration.screen_to_stimulus`.
 """
 
 from __future__ import annotations
@@ -25,16 +25,16 @@ import threading
 import time
 from collections.abc import Callable
 
-from drivers.calibration import METHODS, Plan, Result, calibrate
-from drivers.errors import LinkError, TrackerError, TrackerTimeoutError
-from drivers.frames import FrameReader
-from drivers.gaze.geometry import TrackerGeometry
-from drivers.view.live import LiveStream, estimate_gaze
-from drivers.view.observed import ObservedTracker, open_observed
-from drivers.view.payload import calibration_message, hello_message, xy
-from drivers.view.scripts import NAMES, GazeScript
-from drivers.wire import ReceivedImage, Sample
-from protocols.enums import Capability, StreamSelect
+from eyehil.drivers.calibration import METHODS, Plan, Result, calibrate
+from eyehil.drivers.errors import LinkError, TrackerError, TrackerTimeoutError
+from eyehil.drivers.frames import FrameReader
+from eyehil.drivers.gaze.geometry import TrackerGeometry
+from eyehil.drivers.view.live import LiveStream, estimate_gaze
+from eyehil.drivers.view.observed import ObservedTracker, open_observed
+from eyehil.drivers.view.payload import calibration_message, hello_message, xy
+from eyehil.drivers.view.scripts import NAMES, GazeScript
+from eyehil.drivers.wire import ReceivedImage, Sample
+from eyehil.protocols.enums import Capability, StreamSelect
 
 STREAMS = {"features": StreamSelect.FEATURES, "both": StreamSelect.BOTH, "frames": StreamSelect.FRAMES,
            "detect": StreamSelect.BOTH}

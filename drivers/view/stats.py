@@ -1,8 +1,8 @@
 """Health figures of the live stream: sample rate, latency percentiles, confidence over the last seconds.
 
-Host times are microseconds of ``time.monotonic_ns()`` (`drivers.wire.host_now_us`); latency is the
+Host times are microseconds of ``time.monotonic_ns()`` (`eyehil.drivers.wire.host_now_us`); latency is the
 sample's arrival minus its exposure's mid-time, both on the host clock (device time mapped with
-`drivers.client.ClockSync`), in milliseconds. Everything is kept in bounded deques.
+`eyehil.drivers.client.ClockSync`), in milliseconds. Everything is kept in bounded deques.
 """
 
 from __future__ import annotations

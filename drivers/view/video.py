@@ -2,7 +2,7 @@
 
 The session hands each image it shows (`image(image, record)`) and each tick (`tick(message)`); every tick
 writes one frame: per eye of the device (right, then left) the last camera image if one came within
-`STALE_S`, else the rendering of the last features, with the overlay (`drivers.view.overlay`). ``.mp4``
+`STALE_S`, else the rendering of the last features, with the overlay (`eyehil.drivers.view.overlay`). ``.mp4``
 streams to disk (OpenCV's mp4v codec) at `fps`; ``.png`` / ``.apng`` keeps at most `MAX_PNG_FRAMES` frames in
 memory (the rest are counted in `skipped`) and writes them with `cv2.imwriteanimation` on `close`.
 Frames are written at most `fps` times a second of wall time.
@@ -17,9 +17,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from drivers.view.overlay import PANEL, draw_overlay, features_panel, fit, image_panel
-from protocols.enums import Eye
-from protocols.images import Image
+from eyehil.drivers.view.overlay import PANEL, draw_overlay, features_panel, fit, image_panel
+from eyehil.protocols.enums import Eye
+from eyehil.protocols.images import Image
 
 STALE_S = 1.0
 MAX_PNG_FRAMES = 600
@@ -52,7 +52,7 @@ class VideoRecorder:
                                                           record)
 
     def tick(self, message: dict) -> None:
-        """A page update (`drivers.view.session` "tick"): write one frame (at most `fps` per second)."""
+        """A page update (`eyehil.drivers.view.session` "tick"): write one frame (at most `fps` per second)."""
         now = time.monotonic()
         if now - self._last_write < 1 / self.fps:
             return

@@ -14,11 +14,11 @@ from pathlib import Path
 import pytest
 from view_helpers import CHROMIUM, CHROMIUM_ARGS, start_device
 
-from drivers.setup_file import load_geometry
-from drivers.view.server import ViewServer
-from emulator.device.links import LinkRunner
-from emulator.device.setup_file import write_geometry
-from emulator.scene import load_scene
+from eyehil.drivers.setup_file import load_geometry
+from eyehil.drivers.view.server import ViewServer
+from eyehil.emulator.device.links.base import LinkRunner
+from eyehil.emulator.device.setup_file import write_geometry
+from eyehil.emulator.scene import load_scene
 
 
 @pytest.fixture

@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def test_emulate_view_serves_the_page_of_its_device_and_stops_cleanly():
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen([sys.executable, "-m", "eyehil_cli", "emulate", "--link", "tcp", "--view", "--view-port",
+    proc = subprocess.Popen([sys.executable, "-m", "eyehil.cli", "emulate", "--link", "tcp", "--view", "--view-port",
                              "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT)
     try:
         lines = []

@@ -8,11 +8,11 @@ import threading
 import pytest
 from view_helpers import WAIT_MS, start_device
 
-from drivers.setup_file import load_geometry
-from drivers.view.server import ViewServer
-from protocols.native import DEVICE_TYPES
-from protocols.samples import Features
-from protocols.stream import NativeReceiver, Received
+from eyehil.drivers.setup_file import load_geometry
+from eyehil.drivers.view.server import ViewServer
+from eyehil.protocols.native import DEVICE_TYPES
+from eyehil.protocols.samples import Features
+from eyehil.protocols.stream import NativeReceiver, Received
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 
@@ -168,7 +168,7 @@ def test_host_detection_lies_within_2_px_of_the_ground_truth_the_device_sent(bro
 
 
 def test_blink_from_the_page_closes_the_emulated_eyes(browser, device, geometry_file):
-    from emulator.device.cli import ViewBlink
+    from eyehil.emulator.device.cli import ViewBlink
 
     geometry = load_geometry(geometry_file()).geometry
     with ViewServer(device.url, geometry=geometry, oracle=ViewBlink(device.core)) as view:

@@ -12,16 +12,16 @@ import cv2
 import numpy as np
 import pytest
 
-from drivers.setup_file import load_geometry
-from drivers.view.hub import CLIENT_QUEUE, INBOX, Hub
-from drivers.view.overlay import draw_overlay, features_panel
-from drivers.view.payload import HEADER_LENGTH, eye_record, image_message
-from drivers.view.scripts import GazeScript
-from drivers.view.server import MAX_COMMAND_BYTES, ViewServer
-from drivers.view.video import VideoRecorder
-from protocols.enums import Eye, GlintFlags, PupilFlags
-from protocols.images import Image
-from protocols.samples import EyeFeatures, Glint
+from eyehil.drivers.setup_file import load_geometry
+from eyehil.drivers.view.hub import CLIENT_QUEUE, INBOX, Hub
+from eyehil.drivers.view.overlay import draw_overlay, features_panel
+from eyehil.drivers.view.payload import HEADER_LENGTH, eye_record, image_message
+from eyehil.drivers.view.scripts import GazeScript
+from eyehil.drivers.view.server import MAX_COMMAND_BYTES, ViewServer
+from eyehil.drivers.view.video import VideoRecorder
+from eyehil.protocols.enums import Eye, GlintFlags, PupilFlags
+from eyehil.protocols.images import Image
+from eyehil.protocols.samples import EyeFeatures, Glint
 
 RECORD = EyeFeatures(Eye.RIGHT, PupilFlags.DETECTED, 200.5, 150.25, 30.0, 28.0, 12.0, 0.9,
                      (Glint(0, 210.0, 152.0), Glint(1, 0.0, 0.0, GlintFlags(0))))
@@ -136,7 +136,7 @@ def test_the_video_holds_the_frames_written(tmp_path, suffix):
 
 
 def test_eyehil_view_serves_a_loop_device_for_a_while(capsys, tmp_path):
-    from drivers.view.cli import register
+    from eyehil.drivers.view.cli import register
 
     parser = argparse.ArgumentParser()
     register(parser.add_subparsers(dest="command"))
@@ -182,8 +182,8 @@ def test_hostile_page_messages_are_ignored_or_refused_and_the_view_goes_on(geome
 
 
 def test_the_live_state_is_bounded_and_a_tick_carries_at_most_max_tick_samples_rows():
-    from drivers.view.live import MAX_PENDING, MAX_RECORDS, MAX_TICK_SAMPLES, LiveStream
-    from drivers.wire import Sample
+    from eyehil.drivers.view.live import MAX_PENDING, MAX_RECORDS, MAX_TICK_SAMPLES, LiveStream
+    from eyehil.drivers.wire import Sample
 
     live = LiveStream()
     samples = [Sample(i, i, 4000 * i, 4000 * i + 5000, (RECORD,)) for i in range(3 * MAX_PENDING)]

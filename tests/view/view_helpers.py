@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import os
 
-from emulator.device.build import DeviceOptions, build_device
-from emulator.device.links import LinkRunner
-from emulator.device.tcp_link import TcpLink
+from eyehil.emulator.device.build import DeviceOptions, build_device
+from eyehil.emulator.device.links.base import LinkRunner
+from eyehil.emulator.device.links.tcp import TcpLink
 
 CHROMIUM = os.environ.get("EYEHIL_CHROMIUM", "/usr/bin/chromium")
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
