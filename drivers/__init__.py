@@ -8,6 +8,7 @@
 - `gaze/`: the estimators (pure numerics); `detect/`: features from camera frames with OpenCV;
   `frames`: the frames-only mode (FRAME_CHUNKs -> images -> detected samples);
 - `urlhandlers/`: the same links as pyserial URL handlers (``eyehil+loop://`` ...).
+- `view/`: the live web view (`eyehil view`; optional extra `view`), a host like any other.
 """
 
 from eyehil.drivers.client import Tracker, open_tracker

@@ -24,6 +24,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "render": ("eyehil.emulator.render.cli:register", "write synthetic infrared frames with their ground truth"),
     "study": ("eyehil.analysis.study.cli:register", "the replication of Fischer et al. 2023 (the main job)"),
     "discrepancy": ("eyehil.analysis.discrepancy.cli:register", "find, name and add what the model misses"),
+    "view": ("eyehil.drivers.view.cli:register", "host: a live web page of a tracker (camera, features, gaze, health)"),
 }
 
 

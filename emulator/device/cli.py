@@ -17,6 +17,7 @@ import contextlib
 import importlib
 import signal
 import threading
+from pathlib import Path
 
 from eyehil.emulator.device.build import DeviceOptions, build_device, options_from_query
 from eyehil.emulator.device.links.base import LinkRunner
@@ -51,6 +52,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--write-geometry", metavar="FILE", help="write the host's tracker geometry (TOML) for the scene")
     p.add_argument("--lsl", action="store_true", help="zmq: also open an LSL outlet of type Gaze (needs pylsl)")
     p.add_argument("--duration", type=float, help="stop after this many seconds (default: until interrupted)")
+    p.add_argument("--view", action="store_true", help="also serve the live web view (eyehil view) of this device")
+    p.add_argument("--view-port", type=int, default=8765, help="--view: port of the page (default 8765; 0 = any)")
+    p.add_argument("--view-open", action="store_true", help="--view: open the page in the system browser")
+    p.add_argument("--record-video", metavar="FILE", help="--view: also write the eye images (.mp4 or .png)")
     p.set_defaults(func=run)
 
 
@@ -86,6 +91,43 @@ def make_runner(opts: DeviceOptions, args: argparse.Namespace):
     return LinkRunner(build_device(opts), make_link(args.link, args.host, args.port))
 
 
+class ViewBlink:
+    """--view: lets the page close the simulated subject's eyes (the native protocol has no blink command, so only a
+    view in this process can). The blink starts beyond the features the camera has already prepared
+    (`camera.PREPARE_S`), so the runner's thread picks it up from the subject without being interrupted."""
+
+    LEAD_US = 40_000
+
+    def __init__(self, core) -> None:
+        self.core = core
+
+    def blink(self, duration_s: float) -> None:
+        """Close the eyes for `duration_s` seconds, starting in `LEAD_US`."""
+        start = self.core.clock.now_us() + self.LEAD_US
+        self.core.subject.blinks._intervals.append((start, start + round(duration_s * 1e6)))
+
+
+def start_view(url: str, opts: DeviceOptions, args: argparse.Namespace, core=None) -> tuple:
+    """--view: the live page (eyehil.drivers.view), a host on the device's `url` like any other; return (close, server).
+
+    The host package is imported only here: the emulator does not depend on it (DESIGN.md).
+    """
+    if args.link == "zmq" or opts.mode != "native":
+        raise ValueError("--view needs a native-protocol device (--link pty|tcp|usbip, --mode native)")
+    import tempfile
+
+    from eyehil.drivers.view.cli import close_view
+    from eyehil.drivers.view.cli import start_view as serve
+    from eyehil.emulator.device.setup_file import write_geometry
+    from eyehil.emulator.scene import load_scene
+
+    geometry = args.write_geometry or write_geometry(load_scene(opts.scene),
+                                                     Path(tempfile.mkdtemp(prefix="eyehil-view-")) / "geometry.toml")
+    view_args = argparse.Namespace(view_host="127.0.0.1", view_port=args.view_port, view_open=args.view_open,
+                                   view_stream="auto", record_video=args.record_video)
+    return close_view, serve(url, view_args, str(geometry), oracle=None if core is None else ViewBlink(core))
+
+
 def run(args: argparse.Namespace) -> int:
     opts = options(args)
     if args.write_geometry:
@@ -96,8 +138,10 @@ def run(args: argparse.Namespace) -> int:
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())  # SIGTERM stops cleanly, like Ctrl-C
     try:
-        with make_runner(opts, args) as runner:
+        with make_runner(opts, args) as runner, contextlib.ExitStack() as view:
             print(f"url: {runner.url}", flush=True)
+            if args.view:
+                view.callback(*start_view(runner.url, opts, args, getattr(runner, "core", None)))
             print(f"eyehil emulate: {opts.mode} device, scene {opts.scene}, eyes {opts.eyes}[{opts.eye}], "
                   f"script {opts.script}, {opts.clock} clock; Ctrl-C stops", flush=True)
             with contextlib.suppress(KeyboardInterrupt):
