@@ -1,4 +1,4 @@
-"""`ObservedTracker`: a `eyehil.drivers.client.Tracker` that reports every sample it hands out and every target it shows.
+"""`ObservedTracker`: a `drivers.client.Tracker` that reports every sample it hands out and every target it shows.
 
 The view lets `eyehil.drivers.calibration.calibrate` drive the device unchanged and still shows the samples and
 the targets of the calibration live: `on_sample(sample)` runs for each sample `read_sample` returns,

@@ -4,7 +4,7 @@
 clocks, configures the stream (`stream`: "features"; "both" = features and camera images; "frames" = images
 only, the host detects the features with `eyehil.drivers.frames.FrameReader`; "detect" = both streamed, the host
 detects and the device's FEATURES are drawn as the reference, on the emulator the ground truth; "auto" = both if
-the device streams images) and starts it. It publishes dicts (`eyehil.drivers.view.payload`) and binary image messages through
+the device streams images) and starts it. It publishes dicts (`payload`) and binary image messages through
 `publish` (thread-safe, e.g. `Hub.publish_threadsafe`): "hello" (the device), "state" (twice a second and on
 every change), "tick" (`tick_hz` times a second: the samples since the last tick, the last record of each eye,
 gaze, target and health), images (at most `max_image_hz` per eye), "script", "calibration".
