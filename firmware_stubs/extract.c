@@ -15,6 +15,7 @@
 #define COARSE_STEP 0.5
 #define FINE_STEP 0.25
 #define MAX_TRIES 8u            /* dark regions tried as pupils per image */
+#define IRIS_SPREAD_DN 15.0    /* an edge's outside level within this of the median outside level */
 #define LEVEL_OFFSET 3.0        /* px inside / outside the coarse edge where the two levels are read */
 
 void ex_default_params(ex_params *p, int led0_right)
@@ -234,36 +235,48 @@ static double level3(const ex_image *img, double cx, double cy, double c, double
     return sum / 3.0;
 }
 
-/* The pupil edge along the ray from (cx, cy) in direction (c, s), searched in [r_lo, r_hi]: 1 and its
- * radius, or 0 if the ray leaves the image or the edge's outside is not iris (lid, sclera, glint). */
-static int edge_on_ray(const ex_image *img, const ex_params *p, double cx, double cy, double c, double s,
-                       double r_lo, double r_hi, double *r_edge)
-{
-    double r, v_in, v_out, level, prev, prev_r;
+/* What one ray from the pupil centre saw: the coarse edge (first sample at or above the dark threshold), the
+ * levels inside and outside it, and the brightest sample just outside. */
+typedef ex_ray ray;
 
-    for (r = r_lo; r <= r_hi; r += COARSE_STEP) { /* coarse: the first sample at or above the dark threshold */
-        double v = sample(img, cx + r * c, cy + r * s);
+/* Coarse stage along the ray from (cx, cy) in direction (c, s), searched in [r_lo, r_hi]. */
+static void coarse_ray(const ex_image *img, const ex_params *p, double cx, double cy, double r_lo, double r_hi,
+                       ray *y)
+{
+    double r;
+
+    y->ok = 0;
+    for (r = r_lo; r <= r_hi; r += COARSE_STEP) {
+        double v = sample(img, cx + r * y->c, cy + r * y->s);
         if (v < 0.0)
-            return 0;
+            return;
         if (v >= p->dark_max_dn)
             break;
     }
     if (r > r_hi || r < 2.0)
-        return 0;
-    v_in = level3(img, cx, cy, c, s, r - LEVEL_OFFSET > r * 0.4 ? r - LEVEL_OFFSET : r * 0.4, -0.5);
-    v_out = level3(img, cx, cy, c, s, r + LEVEL_OFFSET, 0.5);
-    if (v_in < 0.0 || v_out < 0.0 || v_in >= p->dark_max_dn || v_out < p->dark_max_dn || v_out >= p->iris_max_dn)
-        return 0;
-    for (double q = r; q <= r + LEVEL_OFFSET + 1.5; q += COARSE_STEP) { /* no glint or lid just outside */
-        double v = sample(img, cx + q * c, cy + q * s);
-        if (v < 0.0 || v >= p->iris_max_dn)
-            return 0;
+        return;
+    y->r = r;
+    y->v_in = level3(img, cx, cy, y->c, y->s, r - LEVEL_OFFSET > r * 0.4 ? r - LEVEL_OFFSET : r * 0.4, -0.5);
+    y->v_out = level3(img, cx, cy, y->c, y->s, r + LEVEL_OFFSET, 0.5);
+    y->v_max = 0.0;
+    for (double q = r; q <= r + LEVEL_OFFSET + 1.5; q += COARSE_STEP) {
+        double v = sample(img, cx + q * y->c, cy + q * y->s);
+        if (v < 0.0)
+            return;
+        y->v_max = v > y->v_max ? v : y->v_max;
     }
-    level = (v_in + v_out) / 2.0;
-    prev_r = r - 2.5;
-    prev = sample(img, cx + prev_r * c, cy + prev_r * s);
-    for (double q = prev_r + FINE_STEP; q <= r + 2.5; q += FINE_STEP) {
-        double v = sample(img, cx + q * c, cy + q * s);
+    y->ok = y->v_in >= 0.0 && y->v_out >= 0.0 && y->v_in < p->dark_max_dn && y->v_out >= p->dark_max_dn
+            && y->v_out < p->iris_max_dn && y->v_max < p->iris_max_dn;
+}
+
+/* Fine stage: the crossing of the ray's mid level near its coarse edge, by linear interpolation; 0 if none. */
+static int fine_ray(const ex_image *img, double cx, double cy, const ray *y, double *r_edge)
+{
+    double level = (y->v_in + y->v_out) / 2.0, prev_r = y->r - 2.5, prev;
+
+    prev = sample(img, cx + prev_r * y->c, cy + prev_r * y->s);
+    for (double q = prev_r + FINE_STEP; q <= y->r + 2.5; q += FINE_STEP) {
+        double v = sample(img, cx + q * y->c, cy + q * y->s);
         if (v < 0.0)
             return 0;
         if (prev >= 0.0 && prev < level && v >= level) {
@@ -419,15 +432,34 @@ static double median(const double *v, size_t n)
 static unsigned edge_round(const ex_image *img, const ex_params *p, ex_workspace *ws, const ellipse *seed,
                            double lo, double hi_scale, ellipse *fit, double *rms)
 {
-    unsigned rays = p->rays > EX_MAX_RAYS ? EX_MAX_RAYS : p->rays, n = 0, used = 0;
+    unsigned rays = p->rays > EX_MAX_RAYS ? EX_MAX_RAYS : p->rays, n = 0, used = 0, n_out = 0;
     uint8_t use[EX_MAX_RAYS];
-    double res[EX_MAX_RAYS], q[6], a, b, ang, cx, cy;
+    double res[EX_MAX_RAYS], q[6], a, b, ang, cx, cy, iris;
 
     for (unsigned k = 0; k < rays; k++) {
-        double t = 2.0 * PI * k / rays, c = cos(t), s = sin(t), re = radius_along(seed, t), r;
-        if (edge_on_ray(img, p, seed->cx, seed->cy, c, s, lo * re, hi_scale * re + 6.0, &r)) {
-            ws->edge_x[n] = (float)(seed->cx + r * c);
-            ws->edge_y[n] = (float)(seed->cy + r * s);
+        double t = 2.0 * PI * k / rays;
+        ws->ray_c[k] = cos(t);
+        ws->ray_s[k] = sin(t);
+    }
+    for (unsigned k = 0; k < rays; k++) { /* coarse edges; the iris level is the median outside level */
+        ray y;
+        double re = radius_along(seed, 2.0 * PI * k / rays);
+        y.c = ws->ray_c[k];
+        y.s = ws->ray_s[k];
+        coarse_ray(img, p, seed->cx, seed->cy, lo * re, hi_scale * re + 6.0, &y);
+        ws->rays[k] = y;
+        if (y.ok)
+            res[n_out++] = y.v_out;
+    }
+    iris = n_out ? median(res, n_out) : 0.0;
+    for (unsigned k = 0; k < rays; k++) { /* a lid, the sclera or a glint close outside: not the pupil's edge */
+        const ray *y = &ws->rays[k];
+        double r;
+        if (!y->ok || fabs(y->v_out - iris) > IRIS_SPREAD_DN || y->v_max > iris + 2.0 * IRIS_SPREAD_DN)
+            continue;
+        if (fine_ray(img, seed->cx, seed->cy, y, &r)) {
+            ws->edge_x[n] = (float)(seed->cx + r * y->c);
+            ws->edge_y[n] = (float)(seed->cy + r * y->s);
             use[n++] = 1;
         }
     }
@@ -499,7 +531,7 @@ static int pupil_of(const ex_image *img, const ex_params *p, ex_workspace *ws, c
     } else {
         double share = (double)used / rays;
         eye->confidence = (float)(share / (1.0 + rms / 0.25));
-        if (3u * used < 2u * rays)
+        if (2u * used < rays)
             eye->flags |= EX_PUPIL_PARTIAL;
     }
     eye->cx = (float)fit.cx;

@@ -42,7 +42,7 @@
 
 /* Result flags of an eye (the wire's pupil flags where they match). */
 #define EX_PUPIL_DETECTED 0x01u
-#define EX_PUPIL_PARTIAL 0x02u     /* fewer than 2/3 of the rays found the pupil's edge (eyelid, border) */
+#define EX_PUPIL_PARTIAL 0x02u     /* fewer than half of the rays found the pupil's edge (eyelid, border) */
 #define EX_PUPIL_BLINK 0x08u
 /* Glint flags (the wire's). */
 #define EX_GLINT_VALID 0x01u
@@ -102,6 +102,13 @@ typedef struct {
     uint16_t x0, y0, x1, y1;
 } ex_region;
 
+/* What one edge ray saw (see extract.c): direction, coarse edge radius px, levels inside and outside it and
+ * the brightest sample just outside (DN), and whether it may be the pupil's edge. */
+typedef struct {
+    double c, s, r, v_in, v_out, v_max;
+    int ok;
+} ex_ray;
+
 /* Work memory of ex_extract: runs, their union-find forest and the regions' sums. */
 typedef struct {
     uint16_t run_y[EX_MAX_RUNS], run_x0[EX_MAX_RUNS], run_x1[EX_MAX_RUNS]; /* [x0, x1) */
@@ -110,6 +117,8 @@ typedef struct {
     uint8_t run_bright[EX_MAX_RUNS];
     ex_region region[2][EX_MAX_REGIONS]; /* dark, bright */
     float edge_x[EX_MAX_RAYS], edge_y[EX_MAX_RAYS];
+    double ray_c[EX_MAX_RAYS], ray_s[EX_MAX_RAYS];
+    ex_ray rays[EX_MAX_RAYS];
 } ex_workspace;
 
 /* Defaults for the project's renderer at exposure 1 (pupil 25, iris 95, sclera 165, skin 185 DN, glints

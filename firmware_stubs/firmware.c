@@ -21,6 +21,7 @@
 #include "frame.h"
 #include "hal.h"
 #include "messages.h"
+#include "pipeline.h"
 #include "protocol.h"
 
 #define FW_RESPONSE_RESERVE 512u        /* transmit bytes kept free for responses */
@@ -41,6 +42,8 @@ static struct {
     uint32_t tx_seq;
     uint32_t next_frame_id;       /* expected frame_id of the next exposure */
     int have_frame_id;
+    uint8_t source, eyes;         /* of the running stream */
+    int tracking;                 /* pixels over the full sensor: the firmware moves a tracking window */
     uint8_t payload[EH_MAX_REPLY];
     uint8_t scratch[FW_FRAME_MAX];
     uint8_t wire[FW_WIRE_MAX];
@@ -138,19 +141,24 @@ static void on_configure(const eh_header *h, uint64_t rx_us)
 static void on_start(const eh_header *h, uint64_t rx_us)
 {
     const eh_configure c = current_config();
-    const hal_camera_config cam = {c.rate_hz, c.eyes, c.roi_x, c.roi_y, c.roi_w, c.roi_h};
+    const uint8_t source = (fw.cam.sources & HAL_SOURCE_PIXELS) ? HAL_SOURCE_PIXELS : HAL_SOURCE_FEATURES;
+    const hal_camera_config cam = {c.rate_hz, c.eyes, c.roi_x, c.roi_y, c.roi_w, c.roi_h, source, 0};
 
     (void)rx_us;
     if (fw.st.state == EH_STATE_STREAMING) {
         refuse(h, EH_ERR_BUSY, "already streaming");
         return;
     }
-    if (hal_leds_enable(c.leds) != HAL_OK || hal_camera_start(&cam) != HAL_OK) {
+    if (hal_leds_set((uint8_t)((1u << c.leds) - 1u), 0) != HAL_OK || hal_camera_start(&cam) != HAL_OK) {
         (void)hal_leds_enable(0);
         refuse(h, EH_ERR_INTERNAL, "camera did not start");
         return;
     }
     fw.have_frame_id = 0;
+    fw.source = source;
+    fw.eyes = c.eyes;
+    fw.tracking = source == HAL_SOURCE_PIXELS && c.roi_w == 0;
+    pl_reset();
     fw.st.state = EH_STATE_STREAMING;
     ack(h);
 }
@@ -282,12 +290,32 @@ static void count_camera_gap(uint32_t frame_id)
     fw.have_frame_id = 1;
 }
 
+/* The next exposure's features: from the camera's detector, or extracted here from its raw frame (the
+ * buffer is given back before anything is sent). 1 if `x` holds one, else 0. */
+static int next_exposure(hal_exposure *x)
+{
+    hal_frame frame;
+
+    if (fw.source != HAL_SOURCE_PIXELS)
+        return hal_camera_poll(x) > 0;
+    if (hal_frame_acquire(&frame) <= 0)
+        return 0;
+    (void)pl_features(&frame, fw.eyes, x);
+    hal_frame_release(&frame);
+    if (fw.tracking) { /* the host asked for the full sensor: follow the eyes with a window */
+        uint16_t win[4];
+        pl_window(fw.eyes, win);
+        (void)hal_camera_set_window(win[0], win[1], win[2], win[3]);
+    }
+    return 1;
+}
+
 static void stream_step(void)
 {
     hal_exposure x;
 
     for (unsigned i = 0; i < FW_MAX_SAMPLES_PER_STEP && fw.st.state == EH_STATE_STREAMING; i++) {
-        if (hal_camera_poll(&x) <= 0)
+        if (!next_exposure(&x))
             return; /* none ready, or a camera fault: nothing to send */
         count_camera_gap(x.frame_id);
         if (send_frame(EH_FEATURES, x.timestamp_us, eh_pack_features(fw.payload, &x), FW_RESPONSE_RESERVE) == 0)
@@ -303,6 +331,7 @@ void fw_init(void)
 {
     memset(&fw, 0, sizeof fw);
     hal_camera_get_info(&fw.cam);
+    pl_init(&fw.cam);
     eh_rx_reset(&fw.rx);
     fw.st.state = EH_STATE_IDLE;
 }

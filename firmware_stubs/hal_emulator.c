@@ -2,7 +2,7 @@
  * hal_emulator.c - hal.h on a POSIX host: the command line, the clock (CLOCK_MONOTONIC since hal_init, us),
  * the UART on a file descriptor and hal_idle (poll). The camera, LEDs and stimulus are in hal_sensor.c.
  *
- *   eyehil-firmware --sensor SOCKET [--pty | --uart PATH]
+ *   eyehil-firmware --sensor SOCKET [--pty | --uart PATH] [--camera features|pixels]
  *
  * UART: stdin/stdout by default; --uart PATH opens a serial device or a pseudo-terminal (raw mode if a
  * terminal); --pty creates a pseudo-terminal. With either, the firmware prints "url: PATH" on stdout once it
@@ -89,7 +89,7 @@ static int open_pty(const char **path)
 
 static int usage(const char *argv0)
 {
-    fprintf(stderr, "usage: %s --sensor SOCKET [--pty | --uart PATH]\n", argv0);
+    fprintf(stderr, "usage: %s --sensor SOCKET [--pty | --uart PATH] [--camera features|pixels]\n", argv0);
     return HAL_ERR_INVALID;
 }
 
@@ -125,6 +125,7 @@ int hal_init(int argc, char **argv)
 {
     const char *sensor = NULL, *path = NULL;
     int pty = 0;
+    uint8_t sources = HAL_SOURCE_FEATURES;
     struct sigaction sa;
 
     for (int i = 1; i < argc; i++) {
@@ -134,6 +135,10 @@ int hal_init(int argc, char **argv)
             path = argv[++i];
         else if (strcmp(argv[i], "--sensor") == 0 && i + 1 < argc)
             sensor = argv[++i];
+        else if (strcmp(argv[i], "--camera") == 0 && i + 1 < argc && strcmp(argv[i + 1], "features") == 0)
+            sources = HAL_SOURCE_FEATURES, i++;
+        else if (strcmp(argv[i], "--camera") == 0 && i + 1 < argc && strcmp(argv[i + 1], "pixels") == 0)
+            sources = HAL_SOURCE_PIXELS, i++;
         else
             return usage(argv[0]);
     }
@@ -145,7 +150,7 @@ int hal_init(int argc, char **argv)
     sigaction(SIGINT, &sa, NULL);
     signal(SIGPIPE, SIG_IGN);
     clock_gettime(CLOCK_MONOTONIC, &emu.t0);
-    if (sensor_open(sensor) != 0)
+    if (sensor_open(sensor, sources) != 0)
         return HAL_ERR_IO;
     if (open_uart(pty, path) != HAL_OK) {
         sensor_close();
