@@ -14,6 +14,7 @@
 #define MIN_EDGE_POINTS 8u      /* fewer: the moment ellipse is reported, with a low confidence */
 #define COARSE_STEP 0.5
 #define FINE_STEP 0.25
+#define MIN_PARTIAL_RATIO 0.75  /* b / a of a fit on less than half the edge, else not trusted */
 #define MAX_TRIES 8u            /* dark regions tried as pupils per image */
 #define IRIS_SPREAD_DN 15.0    /* an edge's outside level within this of the median outside level */
 #define LEVEL_OFFSET 3.0        /* px inside / outside the coarse edge where the two levels are read */
@@ -494,6 +495,8 @@ static unsigned edge_round(const ex_image *img, const ex_params *p, ex_workspace
         }
     }
     *rms = sqrt(*rms / used);
+    memcpy(ws->edge_used, use, n);
+    ws->edge_count = (uint16_t)n;
     fit->cx = cx;
     fit->cy = cy;
     fit->a = a / 2.0;
@@ -523,11 +526,13 @@ static int pupil_of(const ex_image *img, const ex_params *p, ex_workspace *ws, c
     }
     if (used > 0 && (fit.a > 1.5 * m.a + 2.0 || fit.b < 0.5 * fit.a)) /* a short arc extrapolated wildly */
         used = 0;
+    if (2u * used < rays && fit.b < MIN_PARTIAL_RATIO * fit.a) /* a pupil seen <= 40 deg off axis is rounder */
+        used = 0;
     eye->flags = EX_PUPIL_DETECTED;
-    if (used == 0) { /* no edge: the region's moments, barely trusted */
+    if (4u * used < rays) { /* too little edge (lids): the region's moments, not a detection */
         fit = m;
         eye->confidence = 0.1f;
-        eye->flags |= EX_PUPIL_PARTIAL;
+        eye->flags = EX_PUPIL_PARTIAL;
     } else {
         double share = (double)used / rays;
         eye->confidence = (float)(share / (1.0 + rms / 0.25));

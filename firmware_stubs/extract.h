@@ -89,7 +89,7 @@ typedef struct {
 
 typedef struct {
     uint8_t flags;                 /* EX_OVERFLOW */
-    uint8_t eye_count;             /* pupils found (<= max_eyes), left to right in the image; 0: see blink */
+    uint8_t eye_count;             /* dark regions taken as pupils (<= max_eyes), left to right; 0: see blink */
     uint8_t blink;                 /* 1: no pupil and the eye looks closed */
     uint32_t iris_px;              /* iris-band pixels */
     uint16_t dark_regions, bright_regions;
@@ -116,7 +116,9 @@ typedef struct {
     int16_t region_of[EX_MAX_RUNS];
     uint8_t run_bright[EX_MAX_RUNS];
     ex_region region[2][EX_MAX_REGIONS]; /* dark, bright */
-    float edge_x[EX_MAX_RAYS], edge_y[EX_MAX_RAYS];
+    float edge_x[EX_MAX_RAYS], edge_y[EX_MAX_RAYS]; /* the last edge round's points (window px) */
+    uint8_t edge_used[EX_MAX_RAYS];  /* kept by its fit */
+    uint16_t edge_count;
     double ray_c[EX_MAX_RAYS], ray_s[EX_MAX_RAYS];
     ex_ray rays[EX_MAX_RAYS];
 } ex_workspace;

@@ -76,3 +76,15 @@ int ex_extract_flat(const uint8_t *pixels, int width, int height, int stride, in
     }
     return 0;
 }
+
+/* The last edge round's points of the last call: up to `max` rows (x, y, used) in window px; their count. */
+int ex_flat_edges(float *out, int max)
+{
+    int n = flat_ws.edge_count < max ? flat_ws.edge_count : max;
+    for (int i = 0; i < n; i++) {
+        out[3 * i] = flat_ws.edge_x[i];
+        out[3 * i + 1] = flat_ws.edge_y[i];
+        out[3 * i + 2] = flat_ws.edge_used[i];
+    }
+    return n;
+}

@@ -26,6 +26,7 @@
 
 #define FW_RESPONSE_RESERVE 512u        /* transmit bytes kept free for responses */
 #define FW_MAX_SAMPLES_PER_STEP 16u     /* exposures streamed per superloop pass (commands stay responsive) */
+#define FW_MAX_FRAMES_PER_STEP 1u       /* raw frames extracted per pass: each takes a frame transfer and extraction */
 #define FW_MAX_RX_PER_STEP 1024u        /* received bytes handled per superloop pass */
 #define FW_IDLE_US 10000u               /* longest sleep when nothing is due */
 #define FW_FRAME_MAX (EH_MIN_FRAME + EH_MAX_REPLY)
@@ -314,7 +315,9 @@ static void stream_step(void)
 {
     hal_exposure x;
 
-    for (unsigned i = 0; i < FW_MAX_SAMPLES_PER_STEP && fw.st.state == EH_STATE_STREAMING; i++) {
+    unsigned most = fw.source == HAL_SOURCE_PIXELS ? FW_MAX_FRAMES_PER_STEP : FW_MAX_SAMPLES_PER_STEP;
+
+    for (unsigned i = 0; i < most && fw.st.state == EH_STATE_STREAMING; i++) {
         if (!next_exposure(&x))
             return; /* none ready, or a camera fault: nothing to send */
         count_camera_gap(x.frame_id);

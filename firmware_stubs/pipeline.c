@@ -104,11 +104,13 @@ static void fill_eye(hal_eye *e, uint8_t eye, const ex_eye *found, int blink, ui
     e->eye = eye;
     if (found != NULL) {
         e->flags = found->flags & (EX_PUPIL_DETECTED | EX_PUPIL_PARTIAL);
-        e->centre_x_px = found->cx + x0;
-        e->centre_y_px = found->cy + y0;
-        e->axis_a_px = found->axis_a;
-        e->axis_b_px = found->axis_b;
-        e->angle_deg = found->angle_deg;
+        if (found->flags & EX_PUPIL_DETECTED) { /* else too little edge: tracked, not reported */
+            e->centre_x_px = found->cx + x0;
+            e->centre_y_px = found->cy + y0;
+            e->axis_a_px = found->axis_a;
+            e->axis_b_px = found->axis_b;
+            e->angle_deg = found->angle_deg;
+        }
         e->confidence = found->confidence;
         e->glint_count = found->glint_count;
         for (unsigned g = 0; g < found->glint_count && g < HAL_MAX_LEDS; g++) {
@@ -121,8 +123,8 @@ static void fill_eye(hal_eye *e, uint8_t eye, const ex_eye *found, int blink, ui
         }
         pl.seen[eye] = 1;
         pl.missed[eye] = 0;
-        pl.last_x[eye] = e->centre_x_px;
-        pl.last_y[eye] = e->centre_y_px;
+        pl.last_x[eye] = found->cx + x0;
+        pl.last_y[eye] = found->cy + y0;
         return;
     }
     e->flags = blink ? EX_PUPIL_BLINK : 0u;

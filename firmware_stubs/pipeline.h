@@ -5,7 +5,8 @@
  * Eye assignment: with one eye selected, the largest pupil is that eye; with both, two pupils are ordered
  * by image x (hal_camera_info.right_eye_low_x), and a lone pupil goes to the eye last seen nearer to it
  * (without a memory: to the side of the window's centre it lies on). Pupil flags: DETECTED, PARTIAL (part
- * of the edge hidden: eyelid, window border), BLINK (no pupil and the eye looks closed). One glint record
+ * of the edge hidden: eyelid, window border; PARTIAL alone: so much that the pupil is tracked but not
+ * reported, its ellipse fields 0), BLINK (no pupil and the eye looks closed). One glint record
  * per LED lit in the frame, in LED order. Coordinates: full-sensor px (the window's origin added).
  */
 #define PL_MARGIN_X 160u
