@@ -7,7 +7,7 @@
  * that alternates between features (random but in range) and raw frames (a drawn pupil with glints, or, one
  * frame in eight, random bytes, for the extractor). The stream: well-formed commands of every type with random
  * fields, then mutated (bit flips, bytes inserted, deleted or overwritten, truncation, stray delimiters,
- * runs of garbage). Usage: fuzz_firmware [frames] [seed]; exit status 0 when nothing was wrong.
+ * runs of garbage); one round in five boots in ISCAN mode (its output must be whole records). Usage: fuzz_firmware [frames] [seed]; exit status 0 when nothing was wrong.
  */
 #include <stdio.h>
 #include <stdlib.h>
@@ -16,6 +16,7 @@
 #include "firmware.h"
 #include "frame.h"
 #include "hal.h"
+#include "iscan.h"
 #include "le.h"
 #include "protocol.h"
 
@@ -143,6 +144,14 @@ void hal_camera_stop(void)
 {
     started = 0;
     held = 0;
+}
+
+static uint8_t boot_mode;
+
+void hal_get_boot(hal_boot *boot)
+{
+    boot->mode = boot_mode;
+    boot->iscan_rate_hz = (uint16_t)(rnd() % 4 == 0 ? rnd() : 30 + rnd() % 1000); /* sometimes out of range */
 }
 
 static float frand(float lo, float hi)
@@ -283,6 +292,19 @@ static void check_output(void)
     tx_len = 0;
 }
 
+/* ISCAN output must be whole records, each starting with the header word. */
+static void check_iscan(void)
+{
+    if (tx_len % ISCAN_RECORD != 0)
+        bad_output++;
+    for (size_t i = 0; i + 1 < tx_len; i += ISCAN_RECORD) {
+        frames_out++;
+        if (le_get_u16(tx + i) != ISCAN_HEADER)
+            bad_output++;
+    }
+    tx_len = 0;
+}
+
 /* One command frame of a random type with random fields, then maybe mutated; appended to rx. */
 static void add_command(uint32_t seq)
 {
@@ -365,13 +387,19 @@ int main(int argc, char **argv)
     eh_rx_reset(&out_rx);
     for (int round = 0; done < frames; round++) {
         pixels = round % 2; /* the camera alternates between its two sources */
+        boot_mode = (uint8_t)(round % 5 == 4 ? HAL_MODE_ISCAN : HAL_MODE_NATIVE); /* and ISCAN one round in 5 */
         fw_init();
         for (unsigned i = 0; i < 2000 && done < frames; i++, done++) {
             rx_len = rx_pos = 0;
             add_command((uint32_t)rnd());
+            if (boot_mode == HAL_MODE_ISCAN && rnd() % 4 == 0 && rx_len < RX_CAP)
+                rx[rx_len++] = (uint8_t)(ISCAN_START + rnd() % 2);
             for (int s = 0; s < 3; s++) {
                 fw_step();
-                check_output();
+                if (boot_mode == HAL_MODE_NATIVE)
+                    check_output();
+                else
+                    check_iscan();
             }
         }
     }

@@ -101,6 +101,18 @@ typedef struct {
 
 /* --- board ------------------------------------------------------------------------------------------ */
 
+#define HAL_MODE_NATIVE 0u        /* the eyehil native protocol */
+#define HAL_MODE_ISCAN 1u         /* the ISCAN-compatible legacy output (iscan.h) */
+
+/* How the board was set up out of band (jumpers, EEPROM; the host build's --mode and --rate). */
+typedef struct {
+    uint8_t mode;                     /* HAL_MODE_NATIVE or HAL_MODE_ISCAN */
+    uint16_t iscan_rate_hz;           /* ISCAN's fixed exposure rate */
+} hal_boot;
+
+/* The boot configuration; read once by fw_init. */
+void hal_get_boot(hal_boot *boot);
+
 /* Bring the board up (clock, UART, camera link); the clock starts at 0 here. The host build reads its
  * command line; a board passes (0, NULL). Returns HAL_OK or an error (the firmware then exits). */
 int hal_init(int argc, char **argv);

@@ -71,9 +71,10 @@ class FirmwareRig:
     """A sensor and a firmware process joined on a Unix socket; the firmware's UART is a pseudo-terminal."""
 
     def __init__(self, binary: Path, *, camera: str = "features", wrapper: tuple[str, ...] = (),
-                 **options: object) -> None:
+                 args: tuple[str, ...] = (), **options: object) -> None:
         """Start both; `camera`: "features" (the sensor detects) or "pixels" (raw frames, the firmware extracts);
-        `wrapper`: a command the firmware runs under (e.g. valgrind); `options` are
+        `wrapper`: a command the firmware runs under (e.g. valgrind); `args`: more firmware arguments (e.g.
+        ``("--mode", "iscan")``); `options` are
         `emulator.device.build.options_from_query` keys (scene, eye, script ...)."""
         self._dir = Path(tempfile.mkdtemp(prefix="eyehil-fw-"))  # short: socket paths are limited to 107 bytes
         self.log = self._dir / "firmware.log"
@@ -83,7 +84,7 @@ class FirmwareRig:
         try:
             with self.log.open("wb") as log:
                 self.process = subprocess.Popen([*wrapper, str(binary), "--pty", "--sensor", self.server.path,
-                                                 "--camera", camera], stdout=subprocess.PIPE, stderr=log)
+                                                 "--camera", camera, *args], stdout=subprocess.PIPE, stderr=log)
             self.url = _read_url(self.process, self.log)
         except BaseException:
             self.close(check=False)
