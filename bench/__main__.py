@@ -11,6 +11,7 @@ import os
 import platform
 
 BENCHMARKS = ["forward", "study", "render", "usbip", "device", "zmq", "frames"]
+BENCHMARKS += ["firmware"]  # the firmware's C feature extractor (bench/firmware.py)
 
 
 def main() -> int:
