@@ -1,7 +1,7 @@
 /*
  * extract.h - pupil and glint extraction from one 8-bit infrared image (dark pupil, LED corneal reflections):
  * portable C99, no dynamic allocation, no library beyond <math.h>. The caller owns every buffer: the image
- * (read only, never kept) and an `ex_workspace` (static, about 200 kB with the default limits).
+ * (read only, never kept) and an `ex_workspace` (static, about 250 kB with the default limits).
  *
  * Pipeline (one pass over the pixels, then work proportional to the features found):
  * 1. Classify each pixel: dark (< dark_max_dn: pupil), bright (>= bright_min_dn: glint), iris band

@@ -1,6 +1,6 @@
 /*
  * pipeline.c - raw frame -> FEATURES record (see pipeline.h). Static state only: the extractor's workspace
- * (about 200 kB with the default limits of extract.h) and the last centre of each eye.
+ * (about 250 kB with the default limits of extract.h) and the last centre of each eye.
  */
 #include "pipeline.h"
 

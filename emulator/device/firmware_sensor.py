@@ -115,11 +115,12 @@ class FirmwareSensor:
             "EXPOSE": self._expose, "STIMULUS": self._stimulus, "GEOMETRY": self._geometry, "FRAME": self._frame}
 
     @classmethod
-    def from_options(cls, options: DeviceOptions | None = None, *, frames: bool = True,
+    def from_options(cls, options: DeviceOptions | None = None, *, frames: bool = False,
                      settings: RenderSettings | None = None) -> FirmwareSensor:
         """A sensor in front of the subject `options` describe (scene, eye, head, behaviour, script, seed; the
         device's rate, clock and mode are the firmware's business and are ignored); with `frames`, one that
-        also serves raw frames."""
+        also serves raw frames (its subject then carries appearance channels, whose solver's features differ
+        from the plain one's in the last bits: without `frames` the features equal the Python device's)."""
         options = options or DeviceOptions()
         return cls(build_subject(options, appearance=frames), seed=options.seed, settings=settings)
 
@@ -353,18 +354,19 @@ class SensorServer:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m emulator.device.firmware_sensor --socket PATH [--scene S] [--options QUERY]``."""
+    """``python -m emulator.device.firmware_sensor --socket PATH [--scene S] [--options QUERY] [--frames]``."""
     parser = argparse.ArgumentParser(prog="python -m emulator.device.firmware_sensor", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--socket", required=True, help="Unix socket path to listen on (the firmware's --sensor)")
     parser.add_argument("--scene", default="guestrin2006", help="scene preset or TOML path")
     parser.add_argument("--options", default="", help="more device options, e.g. 'eyes=published&eye=17&script=demo'")
+    parser.add_argument("--frames", action="store_true", help="also serve raw frames (the firmware's --camera pixels)")
     args = parser.parse_args(argv)
     options = options_from_query(args.options, DeviceOptions(scene=args.scene))
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
-        with SensorServer(FirmwareSensor.from_options(options), args.socket) as server:
+        with SensorServer(FirmwareSensor.from_options(options, frames=args.frames), args.socket) as server:
             print(f"sensor: {server.path}", flush=True)
             with contextlib.suppress(KeyboardInterrupt):
                 stop.wait()

@@ -78,7 +78,7 @@ class FirmwareRig:
         `emulator.device.build.options_from_query` keys (scene, eye, script ...)."""
         self._dir = Path(tempfile.mkdtemp(prefix="eyehil-fw-"))  # short: socket paths are limited to 107 bytes
         self.log = self._dir / "firmware.log"
-        self.sensor = FirmwareSensor.from_options(options_from_query(urlencode(options)))
+        self.sensor = FirmwareSensor.from_options(options_from_query(urlencode(options)), frames=camera == "pixels")
         self.server = SensorServer(self.sensor, self._dir / "sensor.sock").start()
         self.process: subprocess.Popen | None = None
         try:

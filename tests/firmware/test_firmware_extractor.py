@@ -150,7 +150,7 @@ def test_closed_eyes_are_blinks(extractor) -> None:
 def test_a_glint_appears_only_for_a_lit_led(extractor, mask: int) -> None:
     """The sensor draws a reflection only for the LEDs of the frame's mask; the extractor reports one glint per lit
     LED, at that LED's ground truth."""
-    sensor = FirmwareSensor.from_options(DeviceOptions(scene="guestrin2006", eyes="published", eye=3))
+    sensor = FirmwareSensor.from_options(DeviceOptions(scene="guestrin2006", eyes="published", eye=3), frames=True)
     try:
         frame = sensor.render(200_000, mask, (0, 0, *sensor.sensor))
     finally:
