@@ -18,11 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.eye.published import published_eyes
-from emulator.forward import simulate
-from emulator.render import render_full, render_roi
-from emulator.render_geometry import eye_outlines
-from emulator.scene import load_scene
+from eyehil.emulator.eye.published import published_eyes
+from eyehil.emulator.forward import simulate
+from eyehil.emulator.render.geometry import eye_outlines
+from eyehil.emulator.render.renderer import render_full, render_roi
+from eyehil.emulator.scene import load_scene
 from firmware_stubs.extractor import Extractor, build_library
 
 TARGETS = {"roi_fps": 1000.0, "full_fps": 250.0}

@@ -34,7 +34,7 @@ space; floats printed with `repr`, which reads back to the same float64). Full t
     anything else                             -> ERR <reason>
 
 `FirmwareSensor` is the protocol without I/O; `SensorServer` serves it on a Unix socket to one firmware at a
-time, on one thread named "eyehil-sensor ..."; ``python -m emulator.device.firmware_sensor --socket PATH``
+time, on one thread named "eyehil-sensor ..."; ``python -m eyehil.emulator.device.firmware_sensor --socket PATH``
 runs one until interrupted.
 """
 
@@ -54,15 +54,15 @@ from dataclasses import replace
 
 import numpy as np
 
-from emulator.device.appearance import AppearanceSolver, closed
-from emulator.device.build import DeviceOptions, build_subject, options_from_query
-from emulator.device.camera import Selection, detect
-from emulator.device.frames import ExposureRenderer, render_region
-from emulator.device.links import register_open, unregister
-from emulator.device.stimulus import stimulus_problem, stimulus_to_screen
-from emulator.device.subject import Subject
-from emulator.render import Frame, RenderSettings
-from protocols.enums import Eye, StimulusFlags
+from eyehil.emulator.device.appearance import AppearanceSolver, closed
+from eyehil.emulator.device.build import DeviceOptions, build_subject, options_from_query
+from eyehil.emulator.device.camera import Selection, detect
+from eyehil.emulator.device.frames import ExposureRenderer, render_region
+from eyehil.emulator.device.links.base import register_open, unregister
+from eyehil.emulator.device.stimulus import stimulus_problem, stimulus_to_screen
+from eyehil.emulator.device.subject import Subject
+from eyehil.emulator.render.renderer import Frame, RenderSettings
+from eyehil.protocols.enums import Eye, StimulusFlags
 
 MAX_LINE = 4096  # bytes of one request line
 TRUTH_KEPT = 4096  # frames whose ground truth `truth_at` still knows
@@ -354,8 +354,8 @@ class SensorServer:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m emulator.device.firmware_sensor --socket PATH [--scene S] [--options QUERY] [--frames]``."""
-    parser = argparse.ArgumentParser(prog="python -m emulator.device.firmware_sensor", description=__doc__,
+    """``python -m eyehil.emulator.device.firmware_sensor --socket PATH [--scene S] [--options QUERY] [--frames]``."""
+    parser = argparse.ArgumentParser(prog="python -m eyehil.emulator.device.firmware_sensor", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--socket", required=True, help="Unix socket path to listen on (the firmware's --sensor)")
     parser.add_argument("--scene", default="guestrin2006", help="scene preset or TOML path")

@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 from firmware_helpers import GOLDEN, SOURCES
 
-from drivers.calibration import Plan, calibrate
-from drivers.client import open_tracker
-from drivers.setup_file import load_geometry
-from emulator.device.setup_file import write_geometry
-from emulator.scene import load_scene
+from eyehil.drivers.calibration import Plan, calibrate
+from eyehil.drivers.client import open_tracker
+from eyehil.drivers.setup_file import load_geometry
+from eyehil.emulator.device.setup_file import write_geometry
+from eyehil.emulator.scene import load_scene
 
 FUZZ_FRAMES = 100_000
 VALGRIND = ("valgrind", "--error-exitcode=99", "--leak-check=full", "--errors-for-leak-kinds=definite",

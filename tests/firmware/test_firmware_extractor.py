@@ -18,14 +18,14 @@ from dataclasses import dataclass, field
 import numpy as np
 import pytest
 
-from emulator.device.build import DeviceOptions
-from emulator.device.firmware_sensor import FirmwareSensor
-from emulator.eye.population import sample
-from emulator.eye.published import published_eyes
-from emulator.forward import simulate
-from emulator.render import render_features, render_roi
-from emulator.render_geometry import eye_outlines
-from emulator.scene import HeadPose, load_scene
+from eyehil.emulator.device.build import DeviceOptions
+from eyehil.emulator.device.firmware_sensor import FirmwareSensor
+from eyehil.emulator.eye.population import sample
+from eyehil.emulator.eye.published import published_eyes
+from eyehil.emulator.forward import simulate
+from eyehil.emulator.render.geometry import eye_outlines
+from eyehil.emulator.render.renderer import render_features, render_roi
+from eyehil.emulator.scene import HeadPose, load_scene
 from firmware_stubs.extractor import (
     GLINT_ON_PUPIL_EDGE,
     GLINT_VALID,

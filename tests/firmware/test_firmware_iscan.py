@@ -1,5 +1,5 @@
 """The C firmware in ISCAN mode (``--mode iscan --rate HZ``), as the Python device has it
-(`emulator.device.iscan`, `protocols.iscan`): 0x80 starts and 0x81 stops a stream of 10-byte records (0x4444,
+(`eyehil.emulator.device.iscan`, `eyehil.protocols.iscan`): 0x80 starts and 0x81 stops a stream of 10-byte records (0x4444,
 pupil H, V, corneal reflection H, V in px x 10) at the fixed rate; other bytes are ignored; the first eye
 the camera sees, LED 0. The records are plausible with the sensor's detector and, from raw frames, agree with the
 ground truth of the frames served."""
@@ -12,8 +12,8 @@ import time
 import numpy as np
 import pytest
 
-from drivers.links import open_link
-from protocols.iscan import IscanCommand, IscanParser
+from eyehil.drivers.links import open_link
+from eyehil.protocols.iscan import IscanCommand, IscanParser
 
 RATE_HZ = 120
 

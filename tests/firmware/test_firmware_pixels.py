@@ -23,12 +23,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drivers.calibration import Plan, calibrate
-from drivers.client import open_tracker
-from drivers.setup_file import load_geometry
-from emulator.device.setup_file import write_geometry
-from emulator.scene import load_scene
-from protocols.enums import Eye, GlintFlags, PupilFlags
+from eyehil.drivers.calibration import Plan, calibrate
+from eyehil.drivers.client import open_tracker
+from eyehil.drivers.setup_file import load_geometry
+from eyehil.emulator.device.setup_file import write_geometry
+from eyehil.emulator.scene import load_scene
+from eyehil.protocols.enums import Eye, GlintFlags, PupilFlags
 
 EYES, EYE = "published", 3  # a published eye whose pupil the lids leave mostly uncovered (see the module docstring)
 RATE_HZ = 30  # the sensor renders each frame in Python: keep up with it
