@@ -10,7 +10,17 @@ import importlib
 import os
 import platform
 
-BENCHMARKS = ["forward", "study", "render", "usbip", "device", "zmq", "frames", "view"]
+BENCHMARKS = [
+    "forward",
+    "study",
+    "render",
+    "usbip",
+    "device",
+    "zmq",
+    "frames",
+    "view",  # the live web view in headless Chromium (bench/view.py)
+    "firmware",  # the firmware's C feature extractor (bench/firmware.py)
+]
 
 
 def main() -> int:

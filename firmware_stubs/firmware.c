@@ -11,6 +11,10 @@
  *   always fit; a sample that does not fit is dropped and counted (STATUS samples_dropped), as are
  *   exposures the camera lost (frame_id gaps).
  * - STIMULUS goes to hal_stimulus (the emulator's simulated subject); without that channel: UNSUPPORTED.
+ * - Features come from the camera's detector (HAL_SOURCE_FEATURES) or are extracted here from its raw frames
+ *   (HAL_SOURCE_PIXELS, pipeline.c), one frame per superloop pass.
+ * - ISCAN mode (hal_get_boot): single command bytes (0x80 start, 0x81 stop) and one 10-byte record per
+ *   exposure at the boot's fixed rate (iscan.c); the first eye the camera sees, LED 0 only.
  * Byte order: little-endian throughout (messages.c, frame.c). Times: u64 us of hal_clock_us.
  */
 #include "firmware.h"
@@ -20,11 +24,14 @@
 #include "config.h"
 #include "frame.h"
 #include "hal.h"
+#include "iscan.h"
 #include "messages.h"
+#include "pipeline.h"
 #include "protocol.h"
 
 #define FW_RESPONSE_RESERVE 512u        /* transmit bytes kept free for responses */
 #define FW_MAX_SAMPLES_PER_STEP 16u     /* exposures streamed per superloop pass (commands stay responsive) */
+#define FW_MAX_FRAMES_PER_STEP 1u       /* raw frames extracted per pass: each takes a frame transfer and extraction */
 #define FW_MAX_RX_PER_STEP 1024u        /* received bytes handled per superloop pass */
 #define FW_IDLE_US 10000u               /* longest sleep when nothing is due */
 #define FW_FRAME_MAX (EH_MIN_FRAME + EH_MAX_REPLY)
@@ -41,6 +48,9 @@ static struct {
     uint32_t tx_seq;
     uint32_t next_frame_id;       /* expected frame_id of the next exposure */
     int have_frame_id;
+    uint8_t source, eyes;         /* of the running stream */
+    hal_boot boot;                /* the protocol (native or ISCAN) */
+    int tracking;                 /* pixels over the full sensor: the firmware moves a tracking window */
     uint8_t payload[EH_MAX_REPLY];
     uint8_t scratch[FW_FRAME_MAX];
     uint8_t wire[FW_WIRE_MAX];
@@ -138,19 +148,24 @@ static void on_configure(const eh_header *h, uint64_t rx_us)
 static void on_start(const eh_header *h, uint64_t rx_us)
 {
     const eh_configure c = current_config();
-    const hal_camera_config cam = {c.rate_hz, c.eyes, c.roi_x, c.roi_y, c.roi_w, c.roi_h};
+    const uint8_t source = (fw.cam.sources & HAL_SOURCE_PIXELS) ? HAL_SOURCE_PIXELS : HAL_SOURCE_FEATURES;
+    const hal_camera_config cam = {c.rate_hz, c.eyes, c.roi_x, c.roi_y, c.roi_w, c.roi_h, source, 0};
 
     (void)rx_us;
     if (fw.st.state == EH_STATE_STREAMING) {
         refuse(h, EH_ERR_BUSY, "already streaming");
         return;
     }
-    if (hal_leds_enable(c.leds) != HAL_OK || hal_camera_start(&cam) != HAL_OK) {
+    if (hal_leds_set((uint8_t)((1u << c.leds) - 1u), 0) != HAL_OK || hal_camera_start(&cam) != HAL_OK) {
         (void)hal_leds_enable(0);
         refuse(h, EH_ERR_INTERNAL, "camera did not start");
         return;
     }
     fw.have_frame_id = 0;
+    fw.source = source;
+    fw.eyes = c.eyes;
+    fw.tracking = source == HAL_SOURCE_PIXELS && c.roi_w == 0;
+    pl_reset();
     fw.st.state = EH_STATE_STREAMING;
     ack(h);
 }
@@ -282,12 +297,34 @@ static void count_camera_gap(uint32_t frame_id)
     fw.have_frame_id = 1;
 }
 
+/* The next exposure's features: from the camera's detector, or extracted here from its raw frame (the
+ * buffer is given back before anything is sent). 1 if `x` holds one, else 0. */
+static int next_exposure(hal_exposure *x)
+{
+    hal_frame frame;
+
+    if (fw.source != HAL_SOURCE_PIXELS)
+        return hal_camera_poll(x) > 0;
+    if (hal_frame_acquire(&frame) <= 0)
+        return 0;
+    (void)pl_features(&frame, fw.eyes, x);
+    hal_frame_release(&frame);
+    if (fw.tracking) { /* the host asked for the full sensor: follow the eyes with a window */
+        uint16_t win[4];
+        pl_window(fw.eyes, win);
+        (void)hal_camera_set_window(win[0], win[1], win[2], win[3]);
+    }
+    return 1;
+}
+
 static void stream_step(void)
 {
     hal_exposure x;
 
-    for (unsigned i = 0; i < FW_MAX_SAMPLES_PER_STEP && fw.st.state == EH_STATE_STREAMING; i++) {
-        if (hal_camera_poll(&x) <= 0)
+    unsigned most = fw.source == HAL_SOURCE_PIXELS ? FW_MAX_FRAMES_PER_STEP : FW_MAX_SAMPLES_PER_STEP;
+
+    for (unsigned i = 0; i < most && fw.st.state == EH_STATE_STREAMING; i++) {
+        if (!next_exposure(&x))
             return; /* none ready, or a camera fault: nothing to send */
         count_camera_gap(x.frame_id);
         if (send_frame(EH_FEATURES, x.timestamp_us, eh_pack_features(fw.payload, &x), FW_RESPONSE_RESERVE) == 0)
@@ -297,20 +334,89 @@ static void stream_step(void)
     }
 }
 
+/* --- ISCAN mode ----------------------------------------------------------------------------------- */
+
+static void iscan_start(void)
+{
+    const uint8_t eyes = (fw.cam.eyes & EH_EYE_RIGHT) ? EH_EYE_RIGHT : EH_EYE_LEFT;
+    const uint8_t source = (fw.cam.sources & HAL_SOURCE_PIXELS) ? HAL_SOURCE_PIXELS : HAL_SOURCE_FEATURES;
+    const hal_camera_config cam = {fw.boot.iscan_rate_hz, eyes, 0, 0, 0, 0, source, 0};
+
+    if (hal_leds_set(1u, 0) != HAL_OK || hal_camera_start(&cam) != HAL_OK) {
+        (void)hal_leds_set(0u, 0);
+        fw.st.commands_refused++; /* a rate the camera cannot run: no stream (ISCAN has no replies) */
+        return;
+    }
+    fw.source = source;
+    fw.eyes = eyes;
+    fw.tracking = source == HAL_SOURCE_PIXELS;
+    fw.have_frame_id = 0;
+    pl_reset();
+    fw.st.state = EH_STATE_STREAMING;
+}
+
+static void iscan_receive_step(void)
+{
+    uint8_t chunk[64];
+    size_t n, total = 0;
+
+    while (total < FW_MAX_RX_PER_STEP && (n = hal_uart_read(chunk, sizeof chunk)) > 0) {
+        total += n;
+        for (size_t i = 0; i < n; i++) {
+            int c = iscan_command(chunk[i]);
+            if (c == 0)
+                continue; /* ignored, as an ISCAN tracker does */
+            fw.st.rx_frames++;
+            if (c > 0 && fw.st.state != EH_STATE_STREAMING) {
+                iscan_start();
+            } else if (c < 0 && fw.st.state == EH_STATE_STREAMING) {
+                hal_camera_stop();
+                (void)hal_leds_set(0u, 0);
+                fw.st.state = EH_STATE_IDLE;
+            }
+        }
+    }
+}
+
+static void iscan_stream_step(void)
+{
+    hal_exposure x;
+    uint8_t record[ISCAN_RECORD];
+    unsigned most = fw.source == HAL_SOURCE_PIXELS ? FW_MAX_FRAMES_PER_STEP : FW_MAX_SAMPLES_PER_STEP;
+
+    for (unsigned i = 0; i < most && fw.st.state == EH_STATE_STREAMING; i++) {
+        if (!next_exposure(&x))
+            return;
+        count_camera_gap(x.frame_id);
+        (void)iscan_pack(record, x.eye_count > 0 ? &x.eyes[0] : NULL);
+        if (hal_uart_write(record, sizeof record) == sizeof record)
+            fw.st.samples_sent++;
+        else
+            fw.st.samples_dropped++; /* the link is slower than the rate: the record is dropped */
+    }
+}
+
 /* --- superloop ------------------------------------------------------------------------------------ */
 
 void fw_init(void)
 {
     memset(&fw, 0, sizeof fw);
+    hal_get_boot(&fw.boot);
     hal_camera_get_info(&fw.cam);
+    pl_init(&fw.cam);
     eh_rx_reset(&fw.rx);
     fw.st.state = EH_STATE_IDLE;
 }
 
 void fw_step(void)
 {
-    receive_step();
-    stream_step();
+    if (fw.boot.mode == HAL_MODE_ISCAN) {
+        iscan_receive_step();
+        iscan_stream_step();
+    } else {
+        receive_step();
+        stream_step();
+    }
     hal_idle(hal_clock_us() + FW_IDLE_US);
 }
 

@@ -1,6 +1,7 @@
 /*
- * hal.h - the hardware abstraction of the eyehil reference firmware: camera (with its feature detector),
- * infrared LEDs, UART, monotonic clock, and (emulator only) the stimulus side channel.
+ * hal.h - the hardware abstraction of the eyehil reference firmware: camera (raw 8-bit frames, or the
+ * features of a hardware detector), infrared LEDs strobed per LED, UART, monotonic clock, and (emulator
+ * only) the stimulus side channel.
  *
  * Units: times are u64 microseconds (us) of ONE monotonic clock whose epoch is power-up (hal_init); image
  * coordinates are pixels of the full sensor, OpenCV convention (origin at the centre of the top-left pixel,
@@ -36,21 +37,42 @@
 /* Pupil flags (FEATURES): 0x01 DETECTED, 0x02 PARTIAL, 0x04 CLIPPED, 0x08 BLINK.
  * Glint flags: 0x01 VALID, 0x02 SATURATED, 0x04 ON_PUPIL_EDGE, 0x08 AMBIGUOUS. */
 
+#define HAL_SOURCE_FEATURES 0x01u  /* the camera has a detector: hal_camera_poll delivers features */
+#define HAL_SOURCE_PIXELS 0x02u    /* the camera delivers raw frames: hal_frame_acquire / hal_frame_release */
+
 /* What the camera is: fixed for the lifetime of the firmware. */
 typedef struct {
     uint16_t width_px, height_px;     /* sensor size */
     uint16_t min_rate_hz, max_rate_hz; /* exposure rates the camera can run */
     uint8_t led_count;                /* infrared LEDs fitted: 1 or 2 (ids 0 .. led_count - 1) */
-    uint8_t eyes;                     /* eyes the detector can report: bit 0 right, bit 1 left */
+    uint8_t eyes;                     /* eyes the camera sees: bit 0 right, bit 1 left */
     uint8_t stimulus;                 /* 1 if hal_stimulus reaches a simulated subject (emulator only) */
+    uint8_t sources;                  /* HAL_SOURCE_FEATURES and/or HAL_SOURCE_PIXELS */
+    uint8_t right_eye_low_x;          /* 1: the subject's right eye appears at smaller image x (camera facing) */
+    float led_dir_x[HAL_MAX_LEDS], led_dir_y[HAL_MAX_LEDS]; /* image direction of each LED from the lens
+                                         (board layout; the glints repeat it): matches glints to LEDs */
 } hal_camera_info;
 
 /* How to run the camera (CONFIGURE's fields the camera needs). */
 typedef struct {
     uint16_t rate_hz;                 /* exposures per second, within [min_rate_hz, max_rate_hz] */
     uint8_t eyes;                     /* eyes to report: bit 0 right, bit 1 left (records in that order) */
-    uint16_t roi_x, roi_y, roi_w, roi_h; /* detection region, sensor px; all 0 = the full sensor */
+    uint16_t roi_x, roi_y, roi_w, roi_h; /* detection region / frame window, sensor px; all 0 = full sensor */
+    uint8_t source;                   /* HAL_SOURCE_FEATURES (0 means the same) or HAL_SOURCE_PIXELS */
+    uint32_t exposure_us;             /* integration time; 0: the camera's default (pixels only) */
 } hal_camera_config;
+
+/* One raw exposure (HAL_SOURCE_PIXELS). The pixel buffer belongs to the HAL: the firmware may read it from
+ * hal_frame_acquire until hal_frame_release, and must not write it or keep the pointer afterwards. */
+typedef struct {
+    const uint8_t *pixels;            /* row-major 8-bit, `stride` bytes per row */
+    size_t stride;
+    uint16_t x0, y0, width, height;   /* the window: its top-left pixel is sensor pixel (x0, y0) */
+    uint32_t frame_id;                /* exposures since power-up (wraps); a gap = exposures lost */
+    uint64_t start_us, timestamp_us;  /* exposure start and mid-exposure time, hal_clock_us's clock */
+    uint32_t exposure_us;             /* integration time */
+    uint8_t leds_lit;                 /* bit i: LED i was strobed during this exposure */
+} hal_frame;
 
 typedef struct {
     uint8_t led;                      /* the LED that made this reflection */
@@ -78,6 +100,18 @@ typedef struct {
 } hal_exposure;
 
 /* --- board ------------------------------------------------------------------------------------------ */
+
+#define HAL_MODE_NATIVE 0u        /* the eyehil native protocol */
+#define HAL_MODE_ISCAN 1u         /* the ISCAN-compatible legacy output (iscan.h) */
+
+/* How the board was set up out of band (jumpers, EEPROM; the host build's --mode and --rate). */
+typedef struct {
+    uint8_t mode;                     /* HAL_MODE_NATIVE or HAL_MODE_ISCAN */
+    uint16_t iscan_rate_hz;           /* ISCAN's fixed exposure rate */
+} hal_boot;
+
+/* The boot configuration; read once by fw_init. */
+void hal_get_boot(hal_boot *boot);
 
 /* Bring the board up (clock, UART, camera link); the clock starts at 0 here. The host build reads its
  * command line; a board passes (0, NULL). Returns HAL_OK or an error (the firmware then exits). */
@@ -116,13 +150,21 @@ size_t hal_uart_write(const uint8_t *data, size_t len);
 void hal_camera_get_info(hal_camera_info *info);
 
 /* Light LEDs 0 .. count - 1 (count 1 or 2) during exposures, or none (count 0). The next exposures carry
- * `count` glint records per eye. Returns HAL_OK, HAL_ERR_INVALID (count > led_count) or HAL_ERR_IO. */
+ * `count` glint records per eye. Returns HAL_OK, HAL_ERR_INVALID (count > led_count) or HAL_ERR_IO.
+ * Same as hal_leds_set((1 << count) - 1, 0). */
 int hal_leds_enable(uint8_t count);
 
+/* Per-LED control: strobe the LEDs whose bit is set in `mask` during every following exposure, for
+ * `strobe_us` centred on the exposure's middle (0 or more than the exposure: the whole exposure); the
+ * others stay dark. Takes effect from the next exposure that starts; each frame reports what was lit.
+ * Returns HAL_OK, HAL_ERR_INVALID (a bit >= led_count) or HAL_ERR_IO. */
+int hal_leds_set(uint8_t mask, uint32_t strobe_us);
+
 /* Start exposing at cfg->rate_hz from now: exposure k (k = 0, 1, ...) has its mid-exposure time at
- * t0 + round((k + 1) * 1e6 / rate_hz) us, t0 = hal_clock_us() at this call. Returns HAL_OK,
- * HAL_ERR_INVALID (rate, eyes or region the camera cannot do) or HAL_ERR_IO. Restarting while started
- * is allowed (the firmware never does it). */
+ * t0 + round((k + 1) * 1e6 / rate_hz) us, t0 = hal_clock_us() at this call; cfg->source says whether
+ * hal_camera_poll (features) or hal_frame_acquire (pixels of the window roi_*, the full sensor if all 0)
+ * delivers them. Returns HAL_OK, HAL_ERR_INVALID (rate, eyes, region or source the camera cannot do) or
+ * HAL_ERR_IO. Restarting while started is allowed (the firmware never does it). */
 int hal_camera_start(const hal_camera_config *cfg);
 
 /* Stop exposing; exposures not yet polled are discarded. Idempotent. */
@@ -132,6 +174,21 @@ void hal_camera_stop(void);
  * (or the camera is stopped), HAL_ERR_IO on a camera fault. Never blocks for longer than the detector's
  * latency. Exposures the firmware does not poll in time are lost (a gap in frame_id). */
 int hal_camera_poll(hal_exposure *out);
+
+/* HAL_SOURCE_PIXELS: the oldest complete frame not yet acquired: fill `out` and return 1 (the buffer is
+ * then the firmware's to read until hal_frame_release); 0 if none is ready (or the camera is stopped, or a
+ * frame is still held: at most one at a time); HAL_ERR_IO on a camera fault. Never blocks for longer than
+ * the transfer of one frame. The camera exposes into a few buffers; while all are full or held, exposures
+ * are lost (a gap in frame_id). */
+int hal_frame_acquire(hal_frame *out);
+
+/* HAL_SOURCE_PIXELS: move the frame window to (x, y, w, h) sensor px from the next exposure on (a sensor's
+ * region-of-interest registers; the firmware tracks the eyes with it). HAL_OK, or HAL_ERR_INVALID if the
+ * window is empty or leaves the sensor. */
+int hal_camera_set_window(uint16_t x, uint16_t y, uint16_t w, uint16_t h);
+
+/* Give the buffer of the frame last acquired back to the camera. Idempotent; stopping the camera releases. */
+void hal_frame_release(const hal_frame *frame);
 
 /* --- stimulus (emulator only) ------------------------------------------------------------------------- */
 

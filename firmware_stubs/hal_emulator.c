@@ -2,7 +2,8 @@
  * hal_emulator.c - hal.h on a POSIX host: the command line, the clock (CLOCK_MONOTONIC since hal_init, us),
  * the UART on a file descriptor and hal_idle (poll). The camera, LEDs and stimulus are in hal_sensor.c.
  *
- *   eyehil-firmware --sensor SOCKET [--pty | --uart PATH]
+ *   eyehil-firmware --sensor SOCKET [--pty | --uart PATH] [--camera features|pixels] [--mode native|iscan]
+ *                   [--rate HZ]   (ISCAN's fixed rate, default 120)
  *
  * UART: stdin/stdout by default; --uart PATH opens a serial device or a pseudo-terminal (raw mode if a
  * terminal); --pty creates a pseudo-terminal. With either, the firmware prints "url: PATH" on stdout once it
@@ -89,7 +90,8 @@ static int open_pty(const char **path)
 
 static int usage(const char *argv0)
 {
-    fprintf(stderr, "usage: %s --sensor SOCKET [--pty | --uart PATH]\n", argv0);
+    fprintf(stderr, "usage: %s --sensor SOCKET [--pty | --uart PATH] [--camera features|pixels] "
+                    "[--mode native|iscan] [--rate HZ]\n", argv0);
     return HAL_ERR_INVALID;
 }
 
@@ -121,10 +123,30 @@ static int open_uart(int pty, const char *path)
     return HAL_OK;
 }
 
+static hal_boot boot = {HAL_MODE_NATIVE, 120};
+
+void hal_get_boot(hal_boot *out)
+{
+    *out = boot;
+}
+
+/* A rate in Hz, 1 .. 65535: 1 and *out, else 0. */
+static int parse_rate(const char *text, uint16_t *out)
+{
+    char *end;
+    long v = strtol(text, &end, 10);
+
+    if (end == text || *end != '\0' || v < 1 || v > 65535)
+        return 0;
+    *out = (uint16_t)v;
+    return 1;
+}
+
 int hal_init(int argc, char **argv)
 {
     const char *sensor = NULL, *path = NULL;
     int pty = 0;
+    uint8_t sources = HAL_SOURCE_FEATURES;
     struct sigaction sa;
 
     for (int i = 1; i < argc; i++) {
@@ -134,6 +156,16 @@ int hal_init(int argc, char **argv)
             path = argv[++i];
         else if (strcmp(argv[i], "--sensor") == 0 && i + 1 < argc)
             sensor = argv[++i];
+        else if (strcmp(argv[i], "--mode") == 0 && i + 1 < argc && strcmp(argv[i + 1], "native") == 0)
+            boot.mode = HAL_MODE_NATIVE, i++;
+        else if (strcmp(argv[i], "--mode") == 0 && i + 1 < argc && strcmp(argv[i + 1], "iscan") == 0)
+            boot.mode = HAL_MODE_ISCAN, i++;
+        else if (strcmp(argv[i], "--rate") == 0 && i + 1 < argc && parse_rate(argv[i + 1], &boot.iscan_rate_hz))
+            i++;
+        else if (strcmp(argv[i], "--camera") == 0 && i + 1 < argc && strcmp(argv[i + 1], "features") == 0)
+            sources = HAL_SOURCE_FEATURES, i++;
+        else if (strcmp(argv[i], "--camera") == 0 && i + 1 < argc && strcmp(argv[i + 1], "pixels") == 0)
+            sources = HAL_SOURCE_PIXELS, i++;
         else
             return usage(argv[0]);
     }
@@ -145,7 +177,7 @@ int hal_init(int argc, char **argv)
     sigaction(SIGINT, &sa, NULL);
     signal(SIGPIPE, SIG_IGN);
     clock_gettime(CLOCK_MONOTONIC, &emu.t0);
-    if (sensor_open(sensor) != 0)
+    if (sensor_open(sensor, sources) != 0)
         return HAL_ERR_IO;
     if (open_uart(pty, path) != HAL_OK) {
         sensor_close();

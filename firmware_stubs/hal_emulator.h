@@ -10,8 +10,9 @@
 
 #define SENSOR_NEVER UINT64_MAX
 
-/* Connect to the sensor at the Unix socket `path` and read its INFO; 0 on success (else a message on stderr). */
-int sensor_open(const char *path);
+/* Connect to the sensor at the Unix socket `path` and read its INFO (and, for HAL_SOURCE_PIXELS in `sources`,
+ * its GEOMETRY); the camera then offers `sources`. 0 on success (else a message on stderr). */
+int sensor_open(const char *path, uint8_t sources);
 
 void sensor_close(void);
 

@@ -94,3 +94,25 @@ int sensor_parse_info(const char *line, hal_camera_info *info)
     info->stimulus = (uint8_t)stimulus;
     return 0;
 }
+
+int sensor_parse_geometry(const char *line, hal_camera_info *info)
+{
+    const char *p = line + 8;
+    unsigned long low_x, leds;
+    float dir[2 * HAL_MAX_LEDS];
+
+    if (strncmp(line, "GEOMETRY", 8) != 0 || next_uint(&p, 1, &low_x) || next_uint(&p, HAL_MAX_LEDS, &leds)
+        || leds != info->led_count)
+        return -1;
+    for (size_t i = 0; i < 2 * leds; i++)
+        if (next_float(&p, &dir[i]) || !(dir[i] > -1e6f && dir[i] < 1e6f)) /* finite, bounded */
+            return -1;
+    if (at_end(p))
+        return -1;
+    info->right_eye_low_x = (uint8_t)low_x;
+    for (size_t i = 0; i < HAL_MAX_LEDS; i++) {
+        info->led_dir_x[i] = i < leds ? dir[2 * i] : 0.0f;
+        info->led_dir_y[i] = i < leds ? dir[2 * i + 1] : 0.0f;
+    }
+    return 0;
+}

@@ -16,4 +16,8 @@ int sensor_parse_features(const char *line, hal_exposure *x);
 /* "INFO <width_px> <height_px> <led_count> <eyes> <stimulus>" into `info` (rates untouched); 0 or -1. */
 int sensor_parse_info(const char *line, hal_camera_info *info);
 
+/* "GEOMETRY <right_eye_low_x> <led_count> {<dir_x> <dir_y>}" (each LED's image direction) into `info`
+ * (whose led_count must match); 0 or -1. */
+int sensor_parse_geometry(const char *line, hal_camera_info *info);
+
 #endif

@@ -25,8 +25,8 @@ from eyehil.protocols.stream import NativeReceiver, Received
 ROOT = Path(__file__).resolve().parents[2]
 SOURCES = ROOT / "firmware_stubs"
 GOLDEN = ROOT / "tests" / "golden"
-START_TIMEOUT_S = 10.0
-EXIT_TIMEOUT_S = 5.0
+START_TIMEOUT_S = 60.0  # generous: the firmware may run under valgrind
+EXIT_TIMEOUT_S = 30.0
 
 
 @dataclass(frozen=True)
@@ -70,17 +70,21 @@ def _read_url(process: subprocess.Popen, log: Path) -> str:
 class FirmwareRig:
     """A sensor and a firmware process joined on a Unix socket; the firmware's UART is a pseudo-terminal."""
 
-    def __init__(self, binary: Path, **options: object) -> None:
-        """Start both; `options` are `eyehil.emulator.device.build.options_from_query` keys (scene, eye, script ...)."""
+    def __init__(self, binary: Path, *, camera: str = "features", wrapper: tuple[str, ...] = (),
+                 args: tuple[str, ...] = (), **options: object) -> None:
+        """Start both; `camera`: "features" (the sensor detects) or "pixels" (raw frames, the firmware extracts);
+        `wrapper`: a command the firmware runs under (e.g. valgrind); `args`: more firmware arguments (e.g.
+        ``("--mode", "iscan")``); `options` are
+        `eyehil.emulator.device.build.options_from_query` keys (scene, eye, script ...)."""
         self._dir = Path(tempfile.mkdtemp(prefix="eyehil-fw-"))  # short: socket paths are limited to 107 bytes
         self.log = self._dir / "firmware.log"
-        self.sensor = FirmwareSensor.from_options(options_from_query(urlencode(options)))
+        self.sensor = FirmwareSensor.from_options(options_from_query(urlencode(options)), frames=camera == "pixels")
         self.server = SensorServer(self.sensor, self._dir / "sensor.sock").start()
         self.process: subprocess.Popen | None = None
         try:
             with self.log.open("wb") as log:
-                self.process = subprocess.Popen([str(binary), "--pty", "--sensor", self.server.path],
-                                                stdout=subprocess.PIPE, stderr=log)
+                self.process = subprocess.Popen([*wrapper, str(binary), "--pty", "--sensor", self.server.path,
+                                                 "--camera", camera, *args], stdout=subprocess.PIPE, stderr=log)
             self.url = _read_url(self.process, self.log)
         except BaseException:
             self.close(check=False)

@@ -21,7 +21,7 @@ from eyehil.emulator.device.firmware_sensor import FirmwareSensor, SensorServer
 
 @pytest.fixture
 def sensor():
-    s = FirmwareSensor.from_options(DeviceOptions(scene="blignaut2014", script="demo"))
+    s = FirmwareSensor.from_options(DeviceOptions(scene="blignaut2014", script="demo"), frames=True)
     yield s
     s.close()
 
@@ -98,3 +98,32 @@ def test_command_line_serves_until_sigterm() -> None:
                 process.wait()
             process.stdout.close()
         assert not path.exists()
+
+
+def test_geometry_and_frames(sensor: FirmwareSensor) -> None:
+    """Raw frames: GEOMETRY (the eye order and each LED's image direction), FRAME -> PIXELS and the bytes of the
+    window, the ground truth kept per frame; refused windows, masks and exposures."""
+    assert sensor.handle("GEOMETRY") == "GEOMETRY 1 1 0.0 1.0"  # one LED, below the camera: glints below
+    reply = sensor.handle_bytes("FRAME 250000 0 1 400 480 800 240")
+    head, pixels = reply.split(b"\n", 1)
+    assert head == b"PIXELS 800 240" and len(pixels) == 800 * 240
+    mask, window, frame = sensor.truth_at(250000)
+    assert (mask, window) == (1, (400, 480, 800, 240)) and frame.roi_xy == (400, 480)
+    assert np.array_equal(np.frombuffer(pixels, np.uint8).reshape(240, 800), frame.image)
+    assert frame.truth.pupil_centre_px.shape == (2, 2)  # both eyes the camera sees are drawn and kept
+    again = sensor.render(250000, 1, (400, 480, 800, 240))  # the same time: the same noise
+    assert np.array_equal(again.image, frame.image)
+    dark = sensor.render(260000, 0, (400, 480, 800, 240))
+    assert np.isnan(dark.truth.glint_px).all() and (dark.image >= 230).sum() == 0  # no LED lit: no glint
+    for bad in ("FRAME 1 0 1 0 0 0 240", "FRAME 1 0 1 1500 0 320 240", "FRAME 1 0 1 -1 0 320 240",
+                "FRAME 1 0 2 0 0 320 240", "FRAME 1 2000000 1 0 0 320 240", "FRAME 1 0 1 0 0 320",
+                "FRAME x 0 1 0 0 320 240", "GEOMETRY now"):
+        assert sensor.handle(bad).startswith("ERR"), bad
+        assert sensor.handle_bytes(bad).count(b"\n") == 1  # an error carries no pixels
+    assert sensor.truth_at(1) is None
+
+
+def test_exposure_scales_the_image(sensor: FirmwareSensor) -> None:
+    short = sensor.render(300000, 1, (400, 480, 800, 240), exposure_us=500)
+    normal = sensor.render(300000, 1, (400, 480, 800, 240), exposure_us=1000)
+    assert short.image.mean() < 0.6 * normal.image.mean()
