@@ -40,7 +40,7 @@ import numpy as np
 from drivers.gaze.geometry import Camera
 
 _BISECTIONS = 60
-_BRACKET_BISECTIONS = 12
+_BRACKET_BISECTIONS = 8
 _NEWTON_STEPS = 5
 _GAUSS_NEWTON_STEPS = 4
 
@@ -125,28 +125,45 @@ def corneal_distance(o: np.ndarray, leds: np.ndarray, e: np.ndarray, b: np.ndarr
     `distance`: "all-glints" or an LED index (module docstring). NaN where no root is bracketed.
     """
     R = np.broadcast_to(np.asarray(R, float), b.shape[:-1])
-    grazing = R / np.sqrt(np.clip(1.0 - _dot(e, b[..., None, :]) ** 2, 1e-300, None)).max(axis=-1)
+    eb = _dot(e, b[..., None, :])  # (..., n)
+    grazing = R / np.sqrt(np.clip(1.0 - eb**2, 1e-300, None)).max(axis=-1)
     lo, hi = R * (1.0 + 1e-9), grazing * (1.0 - 1e-9)
+    f = _reflection_law(o, leds, e, b, eb, R)
     if distance != "all-glints":
         i = int(distance)
         if not 0 <= i < len(leds):
             raise ValueError(f"distance glint {i} out of range for {len(leds)} LEDs")
-        return _bracketed_root(lambda k: reflection_residuals(k, o, leds, e, b, R)[..., i], lo, hi)
-
-    def total(k):
-        return np.sum(reflection_residuals(k, o, leds, e, b, R), axis=-1)
-
-    k_c = _bracketed_root(total, lo, hi)
+        return _bracketed_root(lambda k: f(k)[..., i], lo, hi)
+    k_c = _bracketed_root(lambda k: np.sum(f(k), axis=-1), lo, hi)
     for _ in range(_GAUSS_NEWTON_STEPS):
         # central slope with a wide step: the f_i are nearly linear in k_c, and at the least-squares point
         # f . df cancels between glints, so a narrow step's rounding noise would jitter k_c by ~1e-5 mm
         h = 1e-4 * k_c
-        f = reflection_residuals(k_c, o, leds, e, b, R)
-        df = reflection_residuals(k_c + h, o, leds, e, b, R) - reflection_residuals(k_c - h, o, leds, e, b, R)
-        df = df / (2 * h[..., None])
-        step = _dot(f, df) / _dot(df, df)
+        fk = f(k_c)
+        df = (f(k_c + h) - f(k_c - h)) / (2 * h[..., None])
+        step = _dot(fk, df) / _dot(df, df)
         k_c = k_c - np.where(np.isfinite(step), step, 0.0)
     return k_c
+
+
+def _reflection_law(o: np.ndarray, leds: np.ndarray, e: np.ndarray, b: np.ndarray, eb: np.ndarray, R):
+    """`reflection_residuals` as a function of k_c alone, in scalar products precomputed once.
+
+    With L_i = l_i - o, q - c = k_q e - k_c b^ and l_i - q = L_i - k_q e, so
+    f_i = [k_q (L.e) - k_c (L.b) - k_q^2 + k_q k_c (e.b)] / |L - k_q e| + k_q - k_c (e.b).
+    """
+    L = np.asarray(leds, float) - o
+    Le, Lb, LL, R2 = _dot(L, e), L @ np.moveaxis(b, -1, 0).reshape(3, -1), _dot(L, L), np.asarray(R)[..., None] ** 2
+    Lb = np.moveaxis(Lb.reshape(len(L), *b.shape[:-1]), 0, -1)
+
+    def f(k_c: np.ndarray) -> np.ndarray:
+        k = np.asarray(k_c)[..., None]
+        kb = k * eb
+        k_q = kb - np.sqrt(np.clip(kb**2 - k**2 + R2, 0.0, None))
+        dist = np.sqrt(LL - 2 * k_q * Le + k_q**2)
+        return (k_q * Le - k * Lb - k_q**2 + k_q * kb) / dist + k_q - kb
+
+    return f
 
 
 def corneal_centre(camera: Camera, leds: np.ndarray, glints_px: np.ndarray, R, distance: str | int = "all-glints"
