@@ -13,7 +13,7 @@ from emulator.scene import load_scene
 @pytest.mark.parametrize("preset", ["guestrin2006", "guestrin2006-table3", "blignaut2014"])
 def test_camera_pitch_aims_at_the_eyes(preset: str) -> None:
     scene = load_scene(preset)
-    x, y, z = scene.camera.position
+    _, y, z = scene.camera.position
     derived = math.degrees(math.atan2(-y, z))  # below the eyes, ahead: tilted up by atan(depth below / distance)
     assert scene.camera.pose_deg["pitch_deg"] == pytest.approx(derived, abs=5e-7)
     # the optical axis then passes through the eyes' height at z = 0 (within 1e-5 mm)

@@ -77,8 +77,8 @@ class GuestrinOptions:
     visual_axis: how (alpha, beta) turn the optic axis w into the visual axis nu.
         "angle-addition" (the 2006 paper: theta + alpha, phi + beta) or "rotation" (rotation
         matrices about fixed world axes, beta about x (up) first, then alpha about y (toward +x)):
-        nu = R_y(alpha) R_x(-beta) w. Both give the same nu for w = +z (straight ahead) and differ
-        by a few hundredths of a degree at the screen's corners.
+        nu = R_y(alpha) R_x(-beta) w, one rigid rotation of every optic axis. Both give the same nu
+        for w = +z (straight ahead) and differ by a few hundredths of a degree at the screen's corners.
     gaze_plane_offset_mm: the point of gaze is the visual axis met with the screen plane moved this
         far along its normal (away from the subject when positive; the study's code: +1 mm, a plane
         at 651 mm for a screen at 650 mm); screen coordinates are its orthogonal projection.
