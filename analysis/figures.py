@@ -43,6 +43,7 @@ def table4(params: dict[str, np.ndarray], published: dict[str, list[float]], pat
             ax.axvline(m, color="k")
             ax.axvspan(m - s, m + s, color="k", alpha=0.1, label="published mean +- SD")
         ax.set_title(name, fontsize=9)
+        ax.set_ylabel("eyes", fontsize=8)
     for ax in axes.ravel()[len(names):]:
         ax.axis("off")
     axes[0, 0].legend(fontsize=7)

@@ -83,7 +83,7 @@ def _features_figure(result: StudyResult, path: Path) -> Path:
     q = result.eyes.anterior_conic
     pick = [int(np.argmin(q)), int(np.argmax(q))]
     f = simulate(result.eyes[pick], load_scene("blignaut2014"))
-    labels = [f"eye {i + 1} (Q_ac {q[i]:+.2f})" for i in pick]
+    labels = [f"eye {i + 1} (Q_ac {q[i]:+.3f})" for i in pick]
     return figures.features(f.pupil_centre_px[:, 0, 0], f.glint_px[:, 0, 0, :, 0, :], labels, path)
 
 
