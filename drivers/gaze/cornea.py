@@ -63,18 +63,22 @@ def _bisect(g, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return np.where(bracketed, 0.5 * (lo + hi), np.nan)
 
 
-def _bracketed_root(g, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+def _bracketed_root(g, lo: np.ndarray, hi: np.ndarray, start: np.ndarray | None = None) -> np.ndarray:
     """Root of an increasing g in [lo, hi], elementwise, to about machine precision; NaN if not bracketed.
 
-    A few bisections narrow the bracket, then Newton steps (central-difference slope) that stay
-    strictly inside the current bracket (a step leaving it is replaced by bisection).
+    A few bisections narrow the bracket (skipped when `start`, a nearby root, is given), then Newton
+    steps (forward-difference slope) that stay inside the current bracket (a step leaving it is
+    replaced by bisection).
     """
     bracketed = (g(lo) < 0) & (g(hi) > 0)
-    for _ in range(_BRACKET_BISECTIONS):
-        mid = 0.5 * (lo + hi)
-        below = g(mid) < 0
-        lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
-    x = 0.5 * (lo + hi)
+    if start is None:
+        for _ in range(_BRACKET_BISECTIONS):
+            mid = 0.5 * (lo + hi)
+            below = g(mid) < 0
+            lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
+        x = 0.5 * (lo + hi)
+    else:
+        x = np.where(np.isfinite(start) & (start > lo) & (start < hi), start, 0.5 * (lo + hi))
     for _ in range(_NEWTON_STEPS):
         h = 1e-7 * np.abs(x)
         gx = g(x)
@@ -119,10 +123,11 @@ def glint_rays(camera: Camera, leds: np.ndarray, glints_px: np.ndarray) -> tuple
 
 
 def corneal_distance(o: np.ndarray, leds: np.ndarray, e: np.ndarray, b: np.ndarray, R,
-                     distance: str | int = "all-glints") -> np.ndarray:
+                     distance: str | int = "all-glints", start: np.ndarray | None = None) -> np.ndarray:
     """k_c (...) mm with c = o + k_c b^, from glint rays e (..., n, 3) and b^ (..., 3) (`glint_rays`).
 
-    `distance`: "all-glints" or an LED index (module docstring). NaN where no root is bracketed.
+    `distance`: "all-glints" or an LED index (module docstring); `start` (...) a nearby k_c (e.g. at a
+    slightly different R) to start Newton from. NaN where no root is bracketed.
     """
     R = np.broadcast_to(np.asarray(R, float), b.shape[:-1])
     eb = _dot(e, b[..., None, :])  # (..., n)
@@ -133,8 +138,8 @@ def corneal_distance(o: np.ndarray, leds: np.ndarray, e: np.ndarray, b: np.ndarr
         i = int(distance)
         if not 0 <= i < len(leds):
             raise ValueError(f"distance glint {i} out of range for {len(leds)} LEDs")
-        return _bracketed_root(lambda k: f(k)[..., i], lo, hi)
-    k_c = _bracketed_root(lambda k: np.sum(f(k), axis=-1), lo, hi)
+        return _bracketed_root(lambda k: f(k)[..., i], lo, hi, start)
+    k_c = _bracketed_root(lambda k: np.sum(f(k), axis=-1), lo, hi, start)
     for _ in range(_GAUSS_NEWTON_STEPS):
         # central slope with a wide step: the f_i are nearly linear in k_c, and at the least-squares point
         # f . df cancels between glints, so a narrow step's rounding noise would jitter k_c by ~1e-5 mm

@@ -83,10 +83,12 @@ class _Problem:
         self.geometry, self.options, self.targets = geometry, options, targets
         self.plane = gaze_plane(geometry, options.gaze_plane_offset_mm)
 
-    def centres(self, rays: _Rays, x: np.ndarray) -> np.ndarray:
-        """Corneal centres (N, T, 3) for radii x[:, 0]."""
+    def centres(self, rays: _Rays, x: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
+        """Corneal centres (N, T, 3) for radii x[:, 0]; `near` (N, T, 3): the centres at a nearby R (a start)."""
         o = self.geometry.camera.o
-        k = corneal_distance(o, self.geometry.leds, rays.e_glints, rays.b, x[:, :1], self.options.corneal_distance)
+        start = None if near is None else np.sum((near - o) * rays.b, axis=-1)
+        k = corneal_distance(o, self.geometry.leds, rays.e_glints, rays.b, x[:, :1], self.options.corneal_distance,
+                             start)
         return o + k[..., None] * rays.b
 
     def residuals(self, rays: _Rays, x: np.ndarray, c: np.ndarray, targets: np.ndarray) -> np.ndarray:
@@ -245,7 +247,7 @@ def _jacobian(problem: _Problem, rays: _Rays, targets, x, c, r, lo, hi) -> np.nd
         xp = x.copy()
         xp[:, j] += h[:, j]
         dx = xp[:, j] - x[:, j]
-        cp = problem.centres(rays, xp) if j == 0 else c
+        cp = problem.centres(rays, xp, c) if j == 0 else c
         J[..., j] = (problem.residuals(rays, xp, cp, targets) - r) / dx[:, None]
     return J
 
@@ -264,5 +266,5 @@ def _lm_step(problem: _Problem, rays: _Rays, targets, x, c, r, lam, lo, hi):
     damped = A + (lam[:, None] * diag)[:, :, None] * np.eye(x.shape[1])
     step = -np.linalg.solve(damped + 1e-30 * np.eye(x.shape[1]), g[..., None])[..., 0]
     xn = np.clip(x + step, lo, hi)
-    cn = problem.centres(rays, xn)
+    cn = problem.centres(rays, xn, c)
     return xn, cn, problem.residuals(rays, xn, cn, targets)
