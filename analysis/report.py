@@ -218,9 +218,12 @@ def _univariate_table(s: dict[str, Any]) -> list[str]:
         uni = r.get("univariate", {})
         lines.append(_row(col, ", ".join(f"{n} {uni[n]['coef']:+.3f} ({uni[n]['r_squared']:.2f})"
                                          for n in r.get("significant_univariate", [])) or "none"))
-    lines += ["", "Parameters other than Q_ac reach p < .05 alone only through their correlation with Q_ac in "
-              "these eyes (each explains at most a few percent of the variance, Q_ac nearly all); the multivariate "
-              "regression of the paper's text separates them."]
+    others = [r["univariate"][n]["r_squared"] for r in s["sensitivity"].values()
+              for n in r.get("significant_univariate", []) if n != "Q_ant_cornea"]
+    if others:
+        lines += ["", f"Parameters other than Q_ac that reach p < .05 alone explain at most {100 * max(others):.0f}% "
+                  "of the variance each (Q_ac alone: most of it); where the multivariate regression of the paper's "
+                  "text does not keep them, their univariate effect is the part they share with Q_ac in these eyes."]
     return lines
 
 
