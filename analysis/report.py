@@ -53,8 +53,11 @@ def _figures(result: StudyResult, summary: dict[str, Any], out: Path) -> list[Pa
     X = np.column_stack([params[k] for k in names])
     cols = error_columns(result)
     best = summary["blignaut"]["best_function"]
+    # Table 4 measures ACD from the anterior cornea (CCT + ACD); the sensitivity columns from the posterior
+    table = {("ACD_from_anterior_cornea_mm" if k == "ACD_mm" else k): (v + params["CCT_mm"] if k == "ACD_mm" else v)
+             for k, v in params.items()} | {"n_lens": result.eyes.lens_index}
     return [
-        figures.table4(params, fischer_simulated()["table4_parameter_distribution"], out / "table4.png"),
+        figures.table4(table, fischer_simulated()["table4_parameter_distribution"], out / "table4.png"),
         _features_figure(result, out / "fig3_features.png"),
         figures.guestrin({"H1": result.h1, "H2": result.h2}, guestrin_real_deg(), fischer_simulated(),
                          out / "fig4_guestrin.png"),
