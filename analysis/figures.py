@@ -122,7 +122,9 @@ def sensitivity(X: np.ndarray, names: list[str], columns: dict[str, np.ndarray],
         ax.plot(pr.x, pr.y, ".", alpha=0.6)
         xs = np.linspace(pr.x.min(), pr.x.max(), 2)
         ax.plot(xs, pr.slope * xs, "k-")
-        ax.set_title(f"{col}: {sig[0]} {pr.slope:+.3f} deg/SD\nR2 = {sens[col]['r_squared']:.2f}", fontsize=9)
+        full = sens[col]["coefficients"][sig[0]]["coef"]  # the report's number (the fit on all 11)
+        ax.set_title(f"{col}: {sig[0]} {full:+.3f} deg/SD (refit on significant {pr.slope:+.3f})\n"
+                     f"R2 = {sens[col]['r_squared']:.2f}", fontsize=8)
         ax.set_xlabel(f"{sig[0]} (z, partial)")
         ax.set_ylabel("error (deg, partial)")
     fig.suptitle(title)
