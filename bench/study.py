@@ -14,11 +14,11 @@ import tempfile
 import time
 from pathlib import Path
 
-from analysis.report import write_outputs
-from analysis.runner import default_workers
-from analysis.study import run_study
-from analysis.summary import summarise_study
-from emulator.eye.published import published_eyes
+from eyehil.analysis.study.replication import run_study
+from eyehil.analysis.study.report import write_outputs
+from eyehil.analysis.study.runner import default_workers
+from eyehil.analysis.study.summary import summarise_study
+from eyehil.emulator.eye.published import published_eyes
 
 TARGET_SECONDS = 10.0
 

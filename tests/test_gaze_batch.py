@@ -1,4 +1,4 @@
-"""The batched Guestrin calibration (`drivers.gaze.guestrin_batch`) against the per-eye estimator on the
+"""The batched Guestrin calibration (`eyehil.drivers.gaze.guestrin_batch`) against the per-eye estimator on the
 published eyes, and its batch independence and failure handling."""
 
 from __future__ import annotations
@@ -6,13 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from analysis.bridge import eye_samples, screen_targets, tracker_geometry
-from drivers.gaze.base import EyeSamples
-from drivers.gaze.guestrin import GuestrinEstimator
-from drivers.gaze.guestrin_batch import calibrate_many
-from emulator.eye.published import published_eyes
-from emulator.forward import simulate
-from emulator.scene import load_scene
+from eyehil.analysis.study.bridge import eye_samples, screen_targets, tracker_geometry
+from eyehil.drivers.gaze.base import EyeSamples
+from eyehil.drivers.gaze.guestrin import GuestrinEstimator
+from eyehil.drivers.gaze.guestrin_batch import calibrate_many
+from eyehil.emulator.eye.published import published_eyes
+from eyehil.emulator.forward import simulate
+from eyehil.emulator.scene import load_scene
 
 N_EYES = 8
 

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from spherical_eye import RIGHT_APEX, SphericalEye, guestrin_geometry, simulate
 
-from analysis.bridge import eye_samples, screen_targets, tracker_geometry
-from drivers.gaze.base import EyeSamples
-from drivers.gaze.cornea import corneal_centre
-from drivers.gaze.guestrin import (
+from eyehil.analysis.study.bridge import eye_samples, screen_targets, tracker_geometry
+from eyehil.drivers.gaze.base import EyeSamples
+from eyehil.drivers.gaze.cornea import corneal_centre
+from eyehil.drivers.gaze.guestrin import (
     PROFILES,
     EyeParameters,
     GuestrinEstimator,
@@ -23,10 +23,10 @@ from drivers.gaze.guestrin import (
     profile,
     visual_axis,
 )
-from drivers.gaze.guestrin_batch import calibrate_many
-from emulator.eye.published import published_eyes
-from emulator.forward import simulate as ray_trace
-from emulator.scene import load_scene
+from eyehil.drivers.gaze.guestrin_batch import calibrate_many
+from eyehil.emulator.eye.published import published_eyes
+from eyehil.emulator.forward import simulate as ray_trace
+from eyehil.emulator.scene import load_scene
 
 EYE = SphericalEye(R=7.6, K=4.4, alpha_deg=5.3, beta_deg=1.8)
 

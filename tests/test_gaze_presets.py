@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from emulator.scene import load_scene
+from eyehil.emulator.scene import load_scene
 
 
 @pytest.mark.parametrize("preset", ["guestrin2006", "guestrin2006-table3", "blignaut2014"])

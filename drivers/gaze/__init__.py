@@ -8,7 +8,7 @@ of Guestrin & Eizenman 2006, its named options `GuestrinOptions` and profiles `P
 
 Batched API (the study and the discrepancy workflow share it; one implementation):
 
-    from drivers.gaze.guestrin_batch import calibrate_many
+    from eyehil.drivers.gaze.guestrin_batch import calibrate_many
     fit = calibrate_many(geometry, samples, targets_mm, options="best")   # or "study-code", or GuestrinOptions
     fit.params          # (N, 4) R mm, K mm, alpha deg, beta deg; NaN rows for eyes that could not calibrate
     fit.reasons         # {eye index: why} for those eyes

@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from drivers.gaze.geometry import Camera
+from eyehil.drivers.gaze.geometry import Camera
 
 _BISECTIONS = 60
 _BRACKET_BISECTIONS = 8

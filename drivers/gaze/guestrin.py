@@ -38,15 +38,15 @@ from typing import Literal
 import numpy as np
 from scipy.optimize import least_squares, minimize
 
-from drivers.gaze.base import (
+from eyehil.drivers.gaze.base import (
     STUDY_VIEWING_DISTANCE_MM,
     Calibration,
     CalibrationFailure,
     EyeSamples,
     check_targets,
 )
-from drivers.gaze.cornea import corneal_centre, corneal_centre_one_led, pupil_centre
-from drivers.gaze.geometry import Screen, TrackerGeometry
+from eyehil.drivers.gaze.cornea import corneal_centre, corneal_centre_one_led, pupil_centre
+from eyehil.drivers.gaze.geometry import Screen, TrackerGeometry
 
 #: Bounds of the calibrated parameters (mm, mm, deg, deg, dimensionless).
 BOUNDS: Mapping[str, tuple[float, float]] = {

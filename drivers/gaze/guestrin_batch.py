@@ -30,10 +30,10 @@ from typing import Literal
 
 import numpy as np
 
-from drivers.gaze.base import STUDY_VIEWING_DISTANCE_MM, EyeSamples
-from drivers.gaze.cornea import corneal_distance, glint_rays, refracted_pupil_centre
-from drivers.gaze.geometry import TrackerGeometry
-from drivers.gaze.guestrin import (
+from eyehil.drivers.gaze.base import STUDY_VIEWING_DISTANCE_MM, EyeSamples
+from eyehil.drivers.gaze.cornea import corneal_distance, glint_rays, refracted_pupil_centre
+from eyehil.drivers.gaze.geometry import TrackerGeometry
+from eyehil.drivers.gaze.guestrin import (
     BOUNDS,
     PROFILES,
     EyeParameters,
