@@ -16,6 +16,7 @@ from eyehil.analysis.study.stats import (
     sensitivity_regression,
     skewness,
     summarise,
+    univariate_regressions,
     welch_t_test,
     welch_t_test_from_stats,
     zscore_columns,
@@ -150,3 +151,17 @@ def test_partial_regression_frisch_waugh_lovell(rng):
         pr = partial_regression(design, y, column)
         assert pr.slope == pytest.approx(full.params[column], abs=TOL)
         np.testing.assert_allclose(pr.y - pr.slope * pr.x, full.resid, atol=TOL)
+
+
+def test_univariate_regressions_are_one_parameter_ols(rng):
+    """Each parameter alone: slope per SD = cov(z, y) / var(z) = r SD(y); R^2 = r^2; p from scipy's linregress."""
+    X, Z, y, names = sensitivity_data(rng)
+    fits = univariate_regressions(X, y, names)
+    assert list(fits) == list(names)
+    for i, name in enumerate(names):
+        ref = sps.linregress(Z[:, i], y)
+        assert fits[name].coef[1] == pytest.approx(ref.slope, abs=TOL)
+        assert fits[name].p[1] == pytest.approx(ref.pvalue, abs=TOL)
+        assert fits[name].r_squared == pytest.approx(ref.rvalue**2, abs=TOL)
+    with pytest.raises(ValueError):
+        univariate_regressions(X[:, :2], y, names)

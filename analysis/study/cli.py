@@ -23,8 +23,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default="study-fischer2023", help="output folder (default ./study-fischer2023)")
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default: one per core)")
     p.add_argument("--scheduler", default=None, help="Dask scheduler address (optional extra 'dask')")
-    p.add_argument("--n1", type=float, default=1.3375,
-                   help="corneal index of the Guestrin estimator (paper text 1.3375; the study code used 1.376)")
+    p.add_argument("--profile", default="study-code", choices=("study-code", "best"),
+                   help="Guestrin estimator profile (default study-code: the study's code, which produced the "
+                        "published numbers; best: eyehil's own)")
+    p.add_argument("--compare", default="best", choices=("study-code", "best", "none"),
+                   help="a second profile run on the same features and reported side by side (default best)")
+    p.add_argument("--head-positions", default="study-code", choices=("study-code", "paper-text"),
+                   help="Guestrin head positions: study-code (+-30 mm vertical, +-40 mm horizontal; default) or "
+                        "paper-text (30 mm left/right, 40 mm forward/back)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -41,9 +47,13 @@ def run(args: argparse.Namespace) -> int:
     if args.workers is not None and args.workers < 1:
         raise ValueError("--workers must be >= 1")
     eyes, about = eyes_from_spec(args.eyes, args.seed)
+    if len(eyes) < 3:
+        raise ValueError(f"--eyes {args.eyes}: the study's statistics need at least 3 eyes, got {len(eyes)}")
     start = time.perf_counter()
     with tqdm(total=len(eyes), unit="eye", desc="study", disable=args.quiet) as bar:
-        result = run_study(eyes, n1=args.n1, workers=args.workers, scheduler=args.scheduler, progress=bar.update)
+        result = run_study(eyes, profile=args.profile, compare=None if args.compare == "none" else args.compare,
+                           head_positions=args.head_positions, workers=args.workers, scheduler=args.scheduler,
+                           progress=bar.update)
     result.settings.update({"eyes": about, "seed": args.seed if args.eyes != "published" else None})
     summary = summarise_study(result)
     written = write_outputs(result, summary, Path(args.out))
@@ -51,8 +61,12 @@ def run(args: argparse.Namespace) -> int:
     held = sum(f.holds for f in findings)
     print(f"{args.name}: {len(eyes)} eyes ({about}) in {time.perf_counter() - start:.1f} s")
     g = summary["guestrin"]
-    print(f"  Guestrin H1 {g['H1']['mean']:.3f} +- {g['H1']['sd']:.3f} deg, H2 {g['H2']['mean']:.3f} +- "
-          f"{g['H2']['sd']:.3f} deg (published 0.36 +- 0.20)")
+    print(f"  Guestrin ({g['profile']}) H1 {g['H1']['mean']:.3f} +- {g['H1']['sd']:.3f} deg, H2 "
+          f"{g['H2']['mean']:.3f} +- {g['H2']['sd']:.3f} deg (published 0.36 +- 0.20)")
+    c = summary.get("guestrin_compare")
+    if c:
+        print(f"  Guestrin ({c['profile']}, same features) H1 {c['H1']['mean']:.3f} +- {c['H1']['sd']:.3f} deg, H2 "
+              f"{c['H2']['mean']:.3f} +- {c['H2']['sd']:.3f} deg")
     best = summary["blignaut"]["best_function"]
     print("  Blignaut best function: " + ", ".join(f"{c} model {v['model']} {v['mean']:.3f}" for c, v in best.items()))
     print(f"  published findings reproduced: {held} of {len(findings)} (see report.md)")

@@ -43,6 +43,7 @@ def table4(params: dict[str, np.ndarray], published: dict[str, list[float]], pat
             ax.axvline(m, color="k")
             ax.axvspan(m - s, m + s, color="k", alpha=0.1, label="published mean +- SD")
         ax.set_title(name, fontsize=9)
+        ax.set_ylabel("eyes", fontsize=8)
     for ax in axes.ravel()[len(names):]:
         ax.axis("off")
     axes[0, 0].legend(fontsize=7)
@@ -121,8 +122,38 @@ def sensitivity(X: np.ndarray, names: list[str], columns: dict[str, np.ndarray],
         ax.plot(pr.x, pr.y, ".", alpha=0.6)
         xs = np.linspace(pr.x.min(), pr.x.max(), 2)
         ax.plot(xs, pr.slope * xs, "k-")
-        ax.set_title(f"{col}: {sig[0]} {pr.slope:+.3f} deg/SD\nR2 = {sens[col]['r_squared']:.2f}", fontsize=9)
+        full = sens[col]["coefficients"][sig[0]]["coef"]  # the report's number (the fit on all 11)
+        ax.set_title(f"{col}: {sig[0]} {full:+.3f} deg/SD (refit on significant {pr.slope:+.3f})\n"
+                     f"R2 = {sens[col]['r_squared']:.2f}", fontsize=8)
         ax.set_xlabel(f"{sig[0]} (z, partial)")
         ax.set_ylabel("error (deg, partial)")
     fig.suptitle(title)
+    return _save(fig, path)
+
+
+def profiles(h1: dict[str, np.ndarray], q_ac: np.ndarray, sens: dict[str, dict[str, Any]], path: Path) -> Path:
+    """Fig. 8 (beyond the paper): the same eyes' H1 under two estimator profiles, and H1 against Q_ac.
+
+    h1: {profile: per-eye H1 (deg)} (first = the replication's profile); sens: {profile: its H1
+    sensitivity summary}, for the Q_ac coefficient (deg per SD) printed in the legend.
+    """
+    (a_name, a), (b_name, b) = list(h1.items())[:2]
+    fig, axes = _figure(1, 2, (11, 4.5))
+    ax, bx = axes[0]
+    ax.plot(b, a, ".", alpha=0.7)
+    top = float(np.nanmax([np.nanmax(a), np.nanmax(b)])) * 1.05
+    ax.plot([0, top], [0, top], "k:", lw=1, label="equal")
+    ax.set_xlabel(f"H1, {b_name} (deg)")
+    ax.set_ylabel(f"H1, {a_name} (deg)")
+    ax.set_title("(a) the same eyes, two estimators")
+    ax.legend(fontsize=8)
+    for name, values in h1.items():
+        coef = sens[name]["H1"]["coefficients"].get("Q_ant_cornea", {}).get("coef", float("nan"))
+        bx.plot(q_ac, values, ".", alpha=0.7,
+                label=f"{name}: mean {np.nanmean(values):.3f} deg, Q_ac {coef:+.3f} deg/SD")
+    bx.set_xlabel("Q_ac (anterior corneal asphericity)")
+    bx.set_ylabel("H1 (deg)")
+    bx.set_title("(b) H1 against corneal asphericity")
+    bx.legend(fontsize=8)
+    fig.suptitle("Guestrin: how much of the error is the estimator's")
     return _save(fig, path)

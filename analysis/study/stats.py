@@ -13,6 +13,9 @@
   squares (statsmodels OLS), p-values from two-sided t-tests of each coefficient; the model is refit
   on the parameters with p < alpha (0.05). Coefficients are in units of the error per SD of the
   parameter. R^2 = 1 - SS_res / SS_tot.
+- Univariate sensitivity: each z-scored parameter alone, error = b0 + b1 z + e (OLS), with its own
+  two-sided p and R^2: the per-parameter fits the study's code ran (the multivariate regression
+  above is the paper's text).
 - Partial regression (added-variable) points for one column of a design (Velleman & Welsch 1981):
   the residuals of y and of that column, each regressed on the other columns; their least-squares
   slope through the origin equals the column's coefficient in the full fit (Frisch-Waugh-Lovell).
@@ -178,6 +181,15 @@ def sensitivity_regression(
     keep = [i for i, name in enumerate(names) if full.p[i + 1] < alpha]
     reduced = ols(y, Z[:, keep], tuple(names[i] for i in keep))
     return Sensitivity(full, tuple(names[i] for i in keep), reduced, alpha)
+
+
+def univariate_regressions(params: np.ndarray, error: np.ndarray, names: Sequence[str]) -> dict[str, OLSFit]:
+    """One OLS of `error` (n,) per z-scored (ddof=1) parameter column of `params` (n, h), by name."""
+    y = _sample(error, 3)
+    Z = zscore_columns(params)
+    if Z.shape != (y.size, len(names)):
+        raise ValueError(f"params must have shape ({y.size}, {len(names)}), got {Z.shape}")
+    return {name: ols(y, Z[:, [i]], (name,)) for i, name in enumerate(names)}
 
 
 @dataclass(frozen=True)

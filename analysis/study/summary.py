@@ -4,8 +4,11 @@ Keys: `table4` {parameter: [mean, sd]}; `guestrin` {H1, H2: {mean, sd, skewness}
 {H1|H2: {statistic, df, p}}}; `blignaut` {by_model: {model: {configuration: mean}}, best_function:
 {configuration: {model, mean}}, one_sample_t: {configuration: {statistic, df, p}}}; `sensitivity`
 {H1, H2, C5 ... C135: {coefficients: {parameter: {coef, p}}, significant: [...], reduced: {parameter:
-coef}, r_squared}} with coefficients in degrees per SD of the z-scored parameter (the full fit on all
-11 parameters; `r_squared` is that of the refit on the significant ones, as the paper reports).
+coef}, r_squared, univariate: {parameter: {coef, p, r_squared}}, significant_univariate: [...]}} with
+coefficients in degrees per SD of the z-scored parameter (the full fit on all 11 parameters, the paper's
+text; `r_squared` is that of the refit on the significant ones, as the paper reports; `univariate` the
+one-parameter fits the study's code ran); `guestrin_compare` {profile, H1, H2: {mean, sd, skewness},
+sensitivity: {H1, H2: as above}} for the comparison profile on the same features (None without one).
 """
 
 from __future__ import annotations
@@ -52,7 +55,7 @@ def _test(t: stats.TTest | stats.FTest) -> dict[str, Any]:
 def guestrin_summary(result: StudyResult) -> dict[str, Any]:
     real = guestrin_real_deg()
     failures = [f for f in result.failures if "blignaut" not in f]
-    out: dict[str, Any] = {"n1": result.settings.get("n1"), "failures": failures}
+    out: dict[str, Any] = {"profile": result.settings.get("guestrin_profile"), "failures": failures}
     for key, values in (("H1", result.h1), ("H2", result.h2)):
         s = stats.summarise(values[np.isfinite(values)])
         out[key] = {"mean": s.mean, "sd": s.sd, "skewness": s.skewness, "n": s.n}
@@ -85,24 +88,43 @@ def error_columns(result: StudyResult) -> dict[str, np.ndarray]:
     return {"H1": result.h1, "H2": result.h2, **best_function_errors(result.blignaut_errors)}
 
 
-def sensitivity_summary(result: StudyResult) -> dict[str, Any]:
+def sensitivity_summary(result: StudyResult, columns: dict[str, np.ndarray] | None = None) -> dict[str, Any]:
+    """Multivariate and univariate sensitivity of each error column (default: the 8 of `error_columns`)."""
     params = study_parameters(result.eyes)
     names = list(params)
     X = np.column_stack([params[k] for k in names])
     out: dict[str, Any] = {}
-    for column, y in error_columns(result).items():
+    for column, y in (columns if columns is not None else error_columns(result)).items():
         ok = np.isfinite(y)
         if ok.sum() <= len(names) + 2:
             out[column] = {"coefficients": {}, "significant": [], "reduced": {}, "r_squared": float("nan"),
-                           "r_squared_all": float("nan"),
+                           "r_squared_all": float("nan"), "univariate": {}, "significant_univariate": [],
                            "skipped": f"{int(ok.sum())} eyes: the regression on {len(names)} parameters needs more"}
             continue
         s = stats.sensitivity_regression(X[ok], y[ok], names)
         full = {n: {"coef": float(s.full.coef[i + 1]), "p": float(s.full.p[i + 1])} for i, n in enumerate(names)}
         reduced = {n: float(s.reduced.coefficient(n)) for n in s.significant}
         strongest = sorted(s.significant, key=lambda n: -abs(full[n]["coef"]))
+        uni = {n: {"coef": float(f.coef[1]), "p": float(f.p[1]), "r_squared": float(f.r_squared)}
+               for n, f in stats.univariate_regressions(X[ok], y[ok], names).items()}
+        uni_sig = sorted((n for n in names if uni[n]["p"] < s.alpha), key=lambda n: -abs(uni[n]["coef"]))
         out[column] = {"coefficients": full, "significant": strongest, "reduced": reduced,
-                       "r_squared": float(s.reduced.r_squared), "r_squared_all": float(s.full.r_squared)}
+                       "r_squared": float(s.reduced.r_squared), "r_squared_all": float(s.full.r_squared),
+                       "univariate": uni, "significant_univariate": uni_sig}
+    return out
+
+
+def compare_summary(result: StudyResult) -> dict[str, Any] | None:
+    """The comparison profile's H1/H2 statistics and sensitivity (same features as the main profile)."""
+    name = result.settings.get("compare_profile")
+    if not name or name not in result.profiles or name == result.settings.get("guestrin_profile"):
+        return None
+    run = result.profiles[name]
+    out: dict[str, Any] = {"profile": name}
+    for key, values in (("H1", run["h1"]), ("H2", run["h2"])):
+        s = stats.summarise(values[np.isfinite(values)])
+        out[key] = {"mean": s.mean, "sd": s.sd, "skewness": s.skewness, "n": s.n}
+    out["sensitivity"] = sensitivity_summary(result, {"H1": run["h1"], "H2": run["h2"]})
     return out
 
 
@@ -114,6 +136,7 @@ def summarise_study(result: StudyResult) -> dict[str, Any]:
         "guestrin": guestrin_summary(result),
         "blignaut": blignaut_summary(result),
         "sensitivity": sensitivity_summary(result),
+        "guestrin_compare": compare_summary(result),
         "counts": result.counts,
         "settings": result.settings,
     }

@@ -57,6 +57,42 @@ def fit_form(
     return coef / scale
 
 
+def fit_form_many(form: Form, features: np.ndarray, values: np.ndarray, used: np.ndarray,
+                  underdetermined: str = "fail") -> tuple[np.ndarray, list[str | None]]:
+    """`fit_form` for N fits at once: coefficients (N, n_terms) and a reason per fit (None if it fitted).
+
+    features (N, n, 2), values (N, n), used (N, n) bool (the rows each fit uses; the others are zeroed,
+    which leaves the least-squares solution, the rank and the column scales unchanged). Each fit is the
+    SVD solution numpy's lstsq computes (singular values below eps max(rows, terms) s_max dropped), on
+    the design with columns scaled to unit maximum magnitude; failed fits have NaN coefficients.
+    """
+    A = np.where(used[..., None], design_matrix(form, features), 0.0)
+    b = np.where(used, np.asarray(values, float), 0.0)
+    n_used, m = used.sum(axis=1), A.shape[-1]
+    scale = np.max(np.abs(A), axis=1)
+    zero = np.any(scale == 0, axis=1)
+    As = A / np.where(scale == 0, 1.0, scale)[:, None, :]
+    U, S, Vt = np.linalg.svd(As, full_matrices=False)
+    cutoff = np.finfo(float).eps * np.maximum(n_used, m)[:, None] * S[:, :1]
+    keep = cutoff < S
+    rank = keep.sum(axis=1)
+    inv = np.where(keep, 1.0 / np.where(keep, S, 1.0), 0.0)
+    coef = np.einsum("nkm,nk->nm", Vt, inv * np.einsum("nrk,nr->nk", U, b)) / np.where(scale == 0, 1.0, scale)
+    reasons: list[str | None] = []
+    for i in range(len(A)):
+        if n_used[i] == 0:
+            reasons.append("no valid calibration fixations")
+        elif zero[i]:
+            reasons.append(f"a term of {form} is zero at every calibration target")
+        elif rank[i] < m and underdetermined == "fail":
+            reasons.append(f"{n_used[i]} targets for {m} terms" if n_used[i] < m else
+                           f"rank-deficient design (rank {rank[i]} < {m} terms)")
+        else:
+            reasons.append(None)
+    failed = np.array([r is not None for r in reasons], bool)
+    return np.where(failed[:, None], np.nan, coef), reasons
+
+
 @dataclass(frozen=True, eq=False)
 class BlignautCalibration(Calibration[BinocularSamples]):
     """Fitted coefficients (screen mm per unit term) of both eyes.

@@ -101,5 +101,10 @@ def describe(form: Form) -> str:
 def design_matrix(form: Form, xy: np.ndarray) -> np.ndarray:
     """Term values (..., n_terms) of `form` at features xy (..., 2): column k = x^i_k y^j_k."""
     xy = np.asarray(xy, float)
-    exps = np.array(form, dtype=float)
-    return np.prod(xy[..., None, :] ** exps, axis=-1)
+    x, y = xy[..., 0], xy[..., 1]
+    top = max(max(i, j) for i, j in form)
+    xp, yp = [np.ones_like(x)], [np.ones_like(y)]
+    for _ in range(top):  # integer powers by repeated products (exact, and no float pow)
+        xp.append(xp[-1] * x)
+        yp.append(yp[-1] * y)
+    return np.stack([xp[i] * yp[j] for i, j in form], axis=-1)
