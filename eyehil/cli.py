@@ -28,6 +28,12 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+def _start_view(*args, **kwargs):
+    from eyehil.emulate_view import start_view
+
+    return start_view(*args, **kwargs)
+
+
 def _version() -> str:
     from eyehil import __version__
 
@@ -43,6 +49,8 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
         if name == wanted:
             module, func = target.split(":")
             getattr(importlib.import_module(module), func)(sub)
+            if name == "emulate":  # the device does not import the host: its --view is joined here
+                sub.choices[name].set_defaults(view_starter=_start_view)
         else:
             sub.add_parser(name, help=summary)
     return parser

@@ -17,7 +17,6 @@ import contextlib
 import importlib
 import signal
 import threading
-from pathlib import Path
 
 from eyehil.emulator.device.build import DeviceOptions, build_device, options_from_query
 from eyehil.emulator.device.links.base import LinkRunner
@@ -107,25 +106,13 @@ class ViewBlink:
         self.core.subject.blinks._intervals.append((start, start + round(duration_s * 1e6)))
 
 
-def start_view(url: str, opts: DeviceOptions, args: argparse.Namespace, core=None) -> tuple:
-    """--view: the live page (eyehil.drivers.view), a host on the device's `url` like any other; return (close, server).
-
-    The host package is imported only here: the emulator does not depend on it (DESIGN.md).
-    """
-    if args.link == "zmq" or opts.mode != "native":
-        raise ValueError("--view needs a native-protocol device (--link pty|tcp|usbip, --mode native)")
-    import tempfile
-
-    from eyehil.drivers.view.cli import close_view
-    from eyehil.drivers.view.cli import start_view as serve
-    from eyehil.emulator.device.setup_file import write_geometry
-    from eyehil.emulator.scene import load_scene
-
-    geometry = args.write_geometry or write_geometry(load_scene(opts.scene),
-                                                     Path(tempfile.mkdtemp(prefix="eyehil-view-")) / "geometry.toml")
-    view_args = argparse.Namespace(view_host="127.0.0.1", view_port=args.view_port, view_open=args.view_open,
-                                   view_stream="auto", record_video=args.record_video)
-    return close_view, serve(url, view_args, str(geometry), oracle=None if core is None else ViewBlink(core))
+def _view_starter(args: argparse.Namespace):
+    """--view: the live page is a host (eyehil.drivers.view), which the emulator does not import (DESIGN.md); the
+    `eyehil` command hands its starter in (`eyehil.emulate_view.start_view`) as the default `view_starter`."""
+    starter = getattr(args, "view_starter", None)
+    if starter is None:
+        raise ValueError("--view is served by the `eyehil` command (eyehil.emulate_view); it is not available here")
+    return starter
 
 
 def run(args: argparse.Namespace) -> int:
@@ -141,7 +128,8 @@ def run(args: argparse.Namespace) -> int:
         with make_runner(opts, args) as runner, contextlib.ExitStack() as view:
             print(f"url: {runner.url}", flush=True)
             if args.view:
-                view.callback(*start_view(runner.url, opts, args, getattr(runner, "core", None)))
+                core = getattr(runner, "core", None)
+                view.callback(*_view_starter(args)(runner.url, opts, args, None if core is None else ViewBlink(core)))
             print(f"eyehil emulate: {opts.mode} device, scene {opts.scene}, eyes {opts.eyes}[{opts.eye}], "
                   f"script {opts.script}, {opts.clock} clock; Ctrl-C stops", flush=True)
             with contextlib.suppress(KeyboardInterrupt):
