@@ -11,6 +11,7 @@ import os
 import platform
 
 BENCHMARKS = ["forward", "study", "render", "usbip", "device", "zmq", "frames"]
+BENCHMARKS += ["opengaze"]  # bench/opengaze.py
 
 
 def main() -> int:

@@ -56,6 +56,7 @@ class DeviceThread:
         self._selection = Selection(tracked, len(scene.leds))
         self.gaze = GazeStream(windows, time, scene.screen.size)
         self.counters: Counter[str] = Counter()
+        self._seq: Counter[str] = Counter()  # per topic, the next sequence number
         self.failure: Exception | None = None
         self._sub = sub
         self._pub = context.socket(zmq.PUB)
@@ -122,7 +123,12 @@ class DeviceThread:
         self._publish(self.capture.on_message(topic, payload))
 
     def _publish(self, payloads: list[dict[str, Any]]) -> None:
+        """Publish, each payload with its topic's sequence number `seq` (0, 1, 2 ... per topic; an extra key
+        Pupil clients ignore, so that a subscriber tells skipped from dropped)."""
         for payload in payloads:
+            topic = payload["topic"]
+            payload["seq"] = self._seq[topic]
+            self._seq[topic] += 1
             self._pub.send_multipart(pack(payload))
         self.counters["published"] += len(payloads)
 
