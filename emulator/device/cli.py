@@ -51,6 +51,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--behaviour", default="", help="e.g. 'latency=0.2,jitter=0.05,blinks=0.3' (s, deg, Hz)")
     p.add_argument("--write-geometry", metavar="FILE", help="write the host's tracker geometry (TOML) for the scene")
     p.add_argument("--lsl", action="store_true", help="zmq: also open an LSL outlet of type Gaze (needs pylsl)")
+    p.add_argument("--record-dir", metavar="DIR", help="zmq: where `R` writes recording folders (never outside)")
     p.add_argument("--lsl-layout", choices=["eyehil", "pupil_relay"], default="eyehil",
                    help="zmq --lsl: eyehil's channels, or Pupil Capture's LSL relay name and channels")
     p.add_argument("--gaze-method", choices=["auto", "guestrin", "blignaut"], default="auto",
@@ -86,7 +87,8 @@ def make_runner(opts: DeviceOptions, args: argparse.Namespace):
     if args.link == "zmq":
         from emulator.device.zmq_server import server_for
 
-        return server_for(opts, args.host, args.port or 50020, lsl=args.lsl, lsl_layout=args.lsl_layout)
+        return server_for(opts, args.host, args.port or 50020, lsl=args.lsl, lsl_layout=args.lsl_layout,
+                          record_dir=args.record_dir)
     if args.link == "opengaze":
         from emulator.device.opengaze.server import server_for as opengaze_server
 

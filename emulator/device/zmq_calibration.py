@@ -25,6 +25,10 @@ Gazers, chosen per scene (`fit`):
   six targets or more, else model 2 (four or more), else model 1 (``GazerBlignaut``);
 - one LED and one eye: no estimator of `drivers.gaze` calibrates it without the eye's distance, so
   ``calibration.failed``.
+
+`fit(..., method=)` forces one: "guestrin" (two LEDs or more) or "blignaut" (both eyes); the Open Gaze facade
+lets the device options choose. `Gazer.map_eyes` gives each eye's own estimate (Blignaut's binocular one to
+both).
 """
 
 from __future__ import annotations
