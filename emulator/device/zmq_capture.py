@@ -10,9 +10,11 @@
   `MAX_TARGETS` new positions per message and per calibration);
 - ``notify.eyehil.stimulus {norm_pos, timestamp?}`` (this emulator's own): show a target without reference
   data; during a calibration it is a target until the next one;
-- ``notify.calibration.should_stop`` -> ``calibration.stopped``, then (the fit runs on a worker thread;
-  `poll` returns the outcome) ``calibration.successful`` and ``calibration.result.v2 {gazer_class_name,
-  params}``, or ``calibration.failed {reason}``; gaze is then mapped with the new gazer;
+- ``notify.calibration.should_stop``: the fit runs on a worker thread; `poll` returns the outcome,
+  ``calibration.successful`` and ``calibration.result.v2 {gazer_class_name, params}``, or
+  ``calibration.failed {reason}``, then ``calibration.stopped`` (Pupil Capture sends ``stopped`` first; the
+  PsychoPy ioHub Pupil Labs backend takes a ``stopped`` before ``successful`` for an aborted setup); gaze is
+  then mapped with the new gazer;
 - ``notify.frame_publishing.set_format {format}`` and ``notify.start_plugin {name: "Frame_Publisher",
   args: {format}}`` -> ``frame_publishing.started {format}``; ``notify.stop_plugin {name:
   "Frame_Publisher"}`` -> ``frame_publishing.stopped``;
@@ -198,7 +200,7 @@ class Capture:
         if self._executor is None:
             self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="eyehil-zmq-fit")
         self._fit = self._executor.submit(fit, fixations, self.scene, self.eye_ids)
-        return [self._note("calibration.stopped")]
+        return []  # calibration.stopped follows the outcome (`poll`)
 
     def poll(self) -> list[dict[str, Any]]:
         """The end of a screen-marker calibration (calibration.stopped), or the outcome of a finished fit
@@ -213,10 +215,11 @@ class Capture:
             return []
         outcome, self._fit = self._fit.result(), None
         if isinstance(outcome, str):
-            return [self._note("calibration.failed", reason=outcome)]
+            return [self._note("calibration.failed", reason=outcome), self._note("calibration.stopped")]
         self.gazer = outcome
         return [self._note("calibration.successful", method=outcome.class_name),
-                self._note("calibration.result.v2", gazer_class_name=outcome.class_name, params=outcome.params)]
+                self._note("calibration.result.v2", gazer_class_name=outcome.class_name, params=outcome.params),
+                self._note("calibration.stopped")]
 
     # --- frames -------------------------------------------------------------------------------
     def _set_format(self, payload: dict[str, Any]) -> list[dict[str, Any]]:

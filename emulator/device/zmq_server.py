@@ -58,6 +58,7 @@ class ServerOptions:
     seed: int = 0  # image noise
     record_dir: str | None = None  # where recordings keep their annotations (None: memory only)
     lsl: bool = False  # also open an LSL outlet of type Gaze (`lsl_outlet`, needs pylsl)
+    surface_name: str = "screen"  # the screen's surface topic: surfaces.<name>
     lsl_layout: str = "eyehil"  # or "pupil_relay": Pupil Capture's LSL relay name and channels
 
     def __post_init__(self) -> None:
@@ -166,7 +167,8 @@ class PupilServer:
                           settle_s=o.settle_s, frame_format=o.frame_format, record_dir=o.record_dir)
         device = DeviceThread(self.context, xsub, sub, self.subject, self.clock, self.time, windows, capture,
                               rate_hz=o.rate_hz, frames=frames, outlet=self.outlet, hwm=o.hwm,
-                              frame_every=max(1, round(o.rate_hz / o.frame_rate_hz)) if frames else 1)
+                              frame_every=max(1, round(o.rate_hz / o.frame_rate_hz)) if frames else 1,
+                              surface_name=o.surface_name)
         self._parts.append(device.capture)
         self._parts.append(device)
         self.device = device
