@@ -47,11 +47,11 @@ def _calibrate(port: int) -> None:
 
 def serve(argv: list[str]) -> None:
     """The server process: calibrates, prints ``port: N epoch: T`` and serves until SIGTERM."""
-    from emulator.device.build import DeviceOptions, build_subject
-    from emulator.device.clock import RealTimeClock
-    from emulator.device.opengaze.core import OpenGazeOptions
-    from emulator.device.opengaze.samples import fraction_to_screen
-    from emulator.device.opengaze.server import OpenGazeServer, ServerOptions
+    from eyehil.emulator.device.build import DeviceOptions, build_subject
+    from eyehil.emulator.device.clock import RealTimeClock
+    from eyehil.emulator.device.opengaze.core import OpenGazeOptions
+    from eyehil.emulator.device.opengaze.samples import fraction_to_screen
+    from eyehil.emulator.device.opengaze.server import OpenGazeServer, ServerOptions
 
     p = argparse.ArgumentParser(prog="python -m bench.opengaze serve")
     p.add_argument("--rate", type=int, default=60)

@@ -8,7 +8,7 @@ import pytest
 from leaks import leak_check
 from opengaze_helpers import start_server
 
-from emulator.device.opengaze.server import OpenGazeServer
+from eyehil.emulator.device.opengaze.server import OpenGazeServer
 
 
 @pytest.fixture(autouse=True)

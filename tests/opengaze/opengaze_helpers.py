@@ -7,11 +7,11 @@ import time
 
 import numpy as np
 
-from emulator.device.build import DeviceOptions
-from emulator.device.opengaze.samples import fraction_to_screen
-from emulator.device.opengaze.server import OpenGazeServer, server_for
-from emulator.scene import Scene
-from protocols.opengaze import Record, parse_record
+from eyehil.emulator.device.build import DeviceOptions
+from eyehil.emulator.device.opengaze.samples import fraction_to_screen
+from eyehil.emulator.device.opengaze.server import OpenGazeServer, server_for
+from eyehil.emulator.scene import Scene
+from eyehil.protocols.opengaze import Record, parse_record
 
 DEADLINE_S = 30.0  # generous: a real process on a busy machine
 

@@ -22,7 +22,7 @@ def _free_port() -> int:
 
 def test_emulate_link_opengaze() -> None:
     port = _free_port()
-    cmd = [sys.executable, "-c", "import eyehil_cli, sys; sys.exit(eyehil_cli.main())", "emulate", "--link",
+    cmd = [sys.executable, "-c", "import eyehil.cli, sys; sys.exit(eyehil.cli.main())", "emulate", "--link",
            "opengaze", "--port", str(port), "--rate", "150", "--gaze-method", "guestrin"]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, env=env, cwd=ROOT)

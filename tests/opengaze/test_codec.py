@@ -1,10 +1,10 @@
-"""protocols.opengaze: records parse and format exactly; hostile lines raise OpenGazeError with a code."""
+"""eyehil.protocols.opengaze: records parse and format exactly; hostile lines raise OpenGazeError with a code."""
 
 from __future__ import annotations
 
 import pytest
 
-from protocols.opengaze import (
+from eyehil.protocols.opengaze import (
     MAX_LINE_BYTES,
     OVERLONG,
     LineSplitter,

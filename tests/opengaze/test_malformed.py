@@ -8,8 +8,8 @@ import time
 
 from opengaze_helpers import DEADLINE_S, LineClient
 
-from emulator.device.opengaze.server import MAX_CLIENTS, MAX_OUT_BYTES
-from protocols.opengaze import MAX_LINE_BYTES
+from eyehil.emulator.device.opengaze.server import MAX_CLIENTS, MAX_OUT_BYTES
+from eyehil.protocols.opengaze import MAX_LINE_BYTES
 
 BAD_LINES = [
     (b'<GET ID="SCREEN_SIZE">\r\n', "", "MALFORMED"),

@@ -13,8 +13,8 @@ import pytest
 import zmq
 from zmq_helpers import eventually
 
-from emulator.device.zmq_capture import MAX_ANNOTATION_BYTES
-from protocols.pupil import MAX_ELEMENTS
+from eyehil.emulator.device.pupil.capture import MAX_ANNOTATION_BYTES
+from eyehil.protocols.pupil import MAX_ELEMENTS
 
 DEADLINE_S = 60.0
 

@@ -6,5 +6,5 @@
 - `samples`: the data values of exposures (gaze, pupils, eye positions), vectorised, with their units;
 - `filters`: the fixation (FPOG) and blink (BK) filters.
 
-The record codec is `protocols.opengaze`.
+The record codec is `eyehil.protocols.opengaze`.
 """

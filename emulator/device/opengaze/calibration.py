@@ -19,9 +19,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.device.opengaze.samples import SIDES, fraction_to_screen, screen_fraction
-from emulator.device.zmq_calibration import Fixations, Gazer, Session, fit
-from emulator.scene import Scene
+from eyehil.emulator.device.opengaze.samples import SIDES, fraction_to_screen, screen_fraction
+from eyehil.emulator.device.pupil.calibration import Fixations, Gazer, Session, fit
+from eyehil.emulator.scene import Scene
 
 MIN_SETTLE_S = 0.35
 #: Gazepoint's default 9-point pattern (fractions, top-left origin), row by row.

@@ -3,7 +3,7 @@
 The server (`opengaze.server`) owns one `OpenGazeDevice` and calls it from its one thread:
 
     cid = device.connect()                      # a client arrived
-    outs = device.handle(cid, line)             # one line from it (bytes, or protocols.opengaze.OVERLONG)
+    outs = device.handle(cid, line)             # one line from it (bytes, or eyehil.protocols.opengaze.OVERLONG)
     outs = device.step()                        # exposures and calibration events due now
     device.disconnect(cid)
 
@@ -14,7 +14,7 @@ State: the data switches (ENABLE_SEND_*, ENABLE_SEND_DATA) belong to each client
 DELAY, TIMEOUT, the running calibration and its result), SCREEN_SIZE, USER_DATA and the display switches
 belong to the device, as on a tracker shared by its clients. The camera exposes at `rate_hz` from the
 start; REC records go to the clients whose ENABLE_SEND_DATA is on, with the fields each enabled, in the
-order of `protocols.opengaze.DATA_FIELDS`. ``CNT`` counts exposures since the start (a client sees gaps when
+order of `eyehil.protocols.opengaze.DATA_FIELDS`. ``CNT`` counts exposures since the start (a client sees gaps when
 records were dropped), ``TIME`` is device seconds since the start, ``TIME_TICK`` device microseconds
 (``TIME_TICK_FREQUENCY`` 1,000,000). Gaze is mapped by the gazer of the last successful calibration (none
 before: POG validity 0). Docs: docs/opengaze.md.
@@ -29,17 +29,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.device.camera import Camera, Exposures, Selection
-from emulator.device.clock import Clock
-from emulator.device.opengaze.calibration import DEFAULT_POINTS, MAX_POINTS, CalibrationRun, Outcome
-from emulator.device.opengaze.filters import BlinkCounter, FixationFilter
-from emulator.device.opengaze.samples import CachedGazer, EyeGeometry, Values, exposure_values, fraction_to_screen
-from emulator.device.subject import Subject
-from emulator.device.zmq_calibration import METHODS
-from emulator.device.zmq_datums import sample_arrays
-from protocols.enums import Eye
-from protocols.native import MAX_RATE_HZ
-from protocols.opengaze import (
+from eyehil.emulator.device.camera import Camera, Exposures, Selection
+from eyehil.emulator.device.clock import Clock
+from eyehil.emulator.device.opengaze.calibration import DEFAULT_POINTS, MAX_POINTS, CalibrationRun, Outcome
+from eyehil.emulator.device.opengaze.filters import BlinkCounter, FixationFilter
+from eyehil.emulator.device.opengaze.samples import (
+    CachedGazer,
+    EyeGeometry,
+    Values,
+    exposure_values,
+    fraction_to_screen,
+)
+from eyehil.emulator.device.pupil.calibration import METHODS
+from eyehil.emulator.device.pupil.datums import sample_arrays
+from eyehil.emulator.device.subject import Subject
+from eyehil.protocols.enums import Eye
+from eyehil.protocols.native import MAX_RATE_HZ
+from eyehil.protocols.opengaze import (
     API_VERSION,
     DATA_FIELDS,
     ENABLE_SEND_DATA,

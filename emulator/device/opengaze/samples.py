@@ -4,7 +4,7 @@ Units and frames (docs/opengaze.md):
 
 - points of gaze (``[LRB]POGX/Y``, ``FPOGX/Y``): fractions of the screen, origin at the top-left corner as
   the subject sees the screen, x to the subject's right, y DOWN ((1, 1) bottom-right). From scene screen mm
-  (`emulator.scene`: x toward world +x = the subject's left, y up) of a W x H mm screen:
+  (`eyehil.emulator.scene`: x toward world +x = the subject's left, y up) of a W x H mm screen:
   ``gx = 0.5 - x_mm / W``, ``gy = 0.5 - y_mm / H``;
 - pupil centre (``[LR]PCX/Y``): fractions of the camera image (full-sensor px / (w, h));
   ``[LR]PD`` the pupil ellipse's major axis in px; ``[LR]PS`` the distance scale (1 at the calibration
@@ -24,11 +24,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.device.camera import Exposures
-from emulator.device.zmq_calibration import Gazer
-from emulator.device.zmq_datums import sample_arrays
-from emulator.scene import Scene
-from protocols.enums import PupilFlags
+from eyehil.emulator.device.camera import Exposures
+from eyehil.emulator.device.pupil.calibration import Gazer
+from eyehil.emulator.device.pupil.datums import sample_arrays
+from eyehil.emulator.scene import Scene
+from eyehil.protocols.enums import PupilFlags
 
 SIDES = ("left", "right")  # Open Gaze's L, R
 

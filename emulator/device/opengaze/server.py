@@ -10,7 +10,7 @@ ready. Limits (docs/opengaze.md), each counted in `counters`:
 
 - at most `MAX_CLIENTS` clients (more are accepted and closed at once: ``clients_refused``);
 - per client, input is read in chunks of `READ_BYTES`, cut into lines of at most
-  `protocols.opengaze.MAX_LINE_BYTES` (longer lines get ``NACK ERROR="TOO_LONG"`` and are skipped), and at
+  `eyehil.protocols.opengaze.MAX_LINE_BYTES` (longer lines get ``NACK ERROR="TOO_LONG"`` and are skipped), and at
   most `MAX_RECORDS_PER_WAKE` records are answered per wake-up (the rest wait in the client's buffer,
   which holds at most `MAX_PENDING_LINES` lines: a client that floods is disconnected,
   ``clients_dropped``);
@@ -34,14 +34,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from emulator.device.build import DeviceOptions, build_subject
-from emulator.device.clock import Clock, RealTimeClock, make_clock
-from emulator.device.links import register_open, unregister
-from emulator.device.opengaze.calibration import DEFAULT_POINTS
-from emulator.device.opengaze.core import OpenGazeDevice, OpenGazeOptions, Out
-from emulator.device.opengaze.samples import fraction_to_screen
-from emulator.device.subject import Subject
-from protocols.opengaze import PORT, LineSplitter
+from eyehil.emulator.device.build import DeviceOptions, build_subject
+from eyehil.emulator.device.clock import Clock, RealTimeClock, make_clock
+from eyehil.emulator.device.links.base import register_open, unregister
+from eyehil.emulator.device.opengaze.calibration import DEFAULT_POINTS
+from eyehil.emulator.device.opengaze.core import OpenGazeDevice, OpenGazeOptions, Out
+from eyehil.emulator.device.opengaze.samples import fraction_to_screen
+from eyehil.emulator.device.subject import Subject
+from eyehil.protocols.opengaze import PORT, LineSplitter
 
 MAX_CLIENTS = 16
 READ_BYTES = 65536
