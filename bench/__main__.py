@@ -19,6 +19,7 @@ BENCHMARKS = [
     "zmq",
     "frames",
     "view",  # the live web view in headless Chromium (bench/view.py)
+    "opengaze",  # Gazepoint Open Gaze samples at 60 and 150 Hz (bench/opengaze.py)
     "firmware",  # the firmware's C feature extractor (bench/firmware.py)
 ]
 

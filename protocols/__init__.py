@@ -5,6 +5,7 @@
 - `stream`: bytes in, decoded messages, faults, counters and sequence gaps out;
 - `batch`: vectorised FEATURES encoding/decoding with numpy; `images`: FRAME_CHUNK split/reassembly;
 - `iscan`: the ISCAN-compatible legacy mode; `pupil`: the Pupil Core Network API (ZeroMQ payloads);
+- `opengaze`: the Gazepoint Open Gaze API (XML records, docs/opengaze.md);
 - `usbip/`: USB/IP messages, URBs and the CDC-ACM device's descriptors;
 - `enums`: the protocol's enumerations and flags;
 - `errors`: the exception tree (drawn in its docstring) and the ERROR codes.

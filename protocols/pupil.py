@@ -8,8 +8,9 @@ are serialised before the first frame is sent, so a payload that cannot be packe
 frame.
 
 Pupil Remote (REQ/REP) requests, checked in this order: any multipart message (forwarded to the
-backbone, reply ``Message forwarded.``), ``SUB_PORT``, ``PUB_PORT``, ``R [name]``, ``r``, ``C``,
-``c``, ``T <float>``, ``t``, ``v``, anything else (``Unknown command.``). The replies are the constants
+backbone, reply ``Message forwarded.``), ``SUB_PORT``, ``PUB_PORT``, then by the first character as
+Pupil Capture does: ``R[ name]``, ``r``, ``C`` and ``c`` (whole request), ``T <float>``, ``t``, ``v``,
+anything else (``Unknown command.``). The replies are the constants
 ``REPLY_*``; a request that is not UTF-8 gets ``Unknown command.``; a multipart request that fails `unpack`
 gets ``Malformed message: <reason>`` and is not forwarded (Pupil Capture would forward it blindly).
 
@@ -31,9 +32,12 @@ from typing import Any
 
 import msgpack
 
-#: Limits on what a receiver accepts from the network (bytes, nesting depth).
+#: Limits on what a receiver accepts from the network (bytes, nesting depth, elements: the items of every
+#: array and map plus the containers themselves, counted while unpacking, so that a small payload of millions
+#: of empty arrays is refused after MAX_ELEMENTS of them instead of costing hundreds of MB).
 MAX_PAYLOAD_BYTES = 16 * 1024 * 1024
 MAX_DEPTH = 32
+MAX_ELEMENTS = 1_000_000
 VERSION = "3.6.0"
 
 RAW = "__raw_data__"
@@ -95,8 +99,19 @@ def unpack(frames: Sequence[bytes]) -> tuple[str, dict[str, Any]]:
         raise PupilMessageError("topic is not UTF-8") from exc
     if len(frames[1]) > MAX_PAYLOAD_BYTES:
         raise PupilMessageError(f"payload of {len(frames[1])} bytes exceeds {MAX_PAYLOAD_BYTES}")
+    count = [0]
+
+    def counted(container: Any) -> Any:
+        count[0] += len(container) + 1
+        if count[0] > MAX_ELEMENTS:
+            raise PupilMessageError(f"payload has more than {MAX_ELEMENTS} elements")
+        return container
+
     try:
-        payload = msgpack.unpackb(bytes(frames[1]), raw=False, strict_map_key=True)
+        payload = msgpack.unpackb(bytes(frames[1]), raw=False, strict_map_key=True, list_hook=counted,
+                                  object_hook=counted, max_array_len=MAX_ELEMENTS, max_map_len=MAX_ELEMENTS)
+    except PupilMessageError:
+        raise
     except (ValueError, msgpack.ExtraData, msgpack.FormatError, msgpack.StackError, TypeError) as exc:
         raise PupilMessageError(f"payload is not valid msgpack with string keys: {exc or type(exc).__name__}") from exc
     if not isinstance(payload, dict):
@@ -112,31 +127,41 @@ class Request:
     """A parsed Pupil Remote request: `kind` and its argument (name, float, text or frames)."""
 
     kind: str  # forward, sub_port, pub_port, record_start, record_stop, calibration_start,
-    # calibration_stop, time_sync, time_query, version, unknown, invalid
+    # calibration_stop, time_sync, time_sync_failed, time_query, version, unknown, invalid
     argument: Any = None
 
 
 def parse_request(frames: Sequence[bytes]) -> Request:
-    """Classify a Pupil Remote request (order as in Pupil Capture's controller)."""
+    """Classify a Pupil Remote request as Pupil Capture's `pupil_remote.py` does: multipart first, then
+    ``SUB_PORT`` and ``PUB_PORT`` exactly, then by the FIRST character (``R`` with the session name from the
+    third character on, ``r``, ``T`` with the float from the third character, ``t``, ``v``), except ``C`` and
+    ``c``, which must be the whole request. ``T`` with no finite float is `time_sync_failed` (Pupil's reply
+    names the text that is no float; we also refuse nan and inf)."""
     if len(frames) > 1:
         return Request("forward", list(frames))
     try:
         text = bytes(frames[0]).decode("utf-8") if frames else ""
     except UnicodeDecodeError:
         return Request("invalid", "request is not UTF-8")
-    fixed = {"SUB_PORT": "sub_port", "PUB_PORT": "pub_port", "r": "record_stop", "C": "calibration_start",
-             "c": "calibration_stop", "t": "time_query", "v": "version"}
-    if text in fixed:
-        return Request(fixed[text])
-    if text == "R" or text.startswith("R "):
+    exact = {"SUB_PORT": "sub_port", "PUB_PORT": "pub_port", "C": "calibration_start", "c": "calibration_stop"}
+    if text in exact:
+        return Request(exact[text])
+    first = text[:1]
+    if first == "R":
         return Request("record_start", text[2:] or None)
-    if text.startswith("T "):
+    if first == "T":
         try:
             value = float(text[2:])
         except ValueError:
-            return Request("unknown", text)
-        return Request("time_sync", value) if math.isfinite(value) else Request("unknown", text)
-    return Request("unknown", text)
+            return Request("time_sync_failed", text[2:])
+        return Request("time_sync", value) if math.isfinite(value) else Request("time_sync_failed", text[2:])
+    plain_kinds = {"r": "record_stop", "t": "time_query", "v": "version"}
+    return Request(plain_kinds[first]) if first in plain_kinds else Request("unknown", text)
+
+
+def timesync_failed_reply(text: str) -> str:
+    """Pupil Capture's reply to a ``T`` whose argument is no float."""
+    return f"'{text}' cannot be converted to float."
 
 
 def notification(subject: str, **fields: Any) -> dict[str, Any]:

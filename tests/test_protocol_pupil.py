@@ -74,7 +74,9 @@ def test_unpack_refuses_malformed_messages(frames) -> None:
     ([b"R session 1"], "record_start", "session 1"), ([b"r"], "record_stop", None),
     ([b"C"], "calibration_start", None), ([b"c"], "calibration_stop", None), ([b"T 12.5"], "time_sync", 12.5),
     ([b"t"], "time_query", None), ([b"v"], "version", None), ([b"hello"], "unknown", "hello"),
-    ([b"T abc"], "unknown", "T abc"), ([b"\xff"], "invalid", "request is not UTF-8"),
+    ([b"T abc"], "time_sync_failed", "abc"), ([b"Rxyz"], "record_start", "yz"),
+    ([b"remote"], "record_stop", None), ([b"time"], "time_query", None), ([b"version"], "version", None),
+    ([b"Cx"], "unknown", "Cx"), ([b""], "unknown", ""), ([b"\xff"], "invalid", "request is not UTF-8"),
 ])
 def test_request_parsing(frames, kind: str, argument) -> None:
     r = parse_request(frames)
@@ -100,7 +102,7 @@ def test_datums_follow_pupil_conventions() -> None:
 
 @pytest.mark.parametrize("text", [b"T nan", b"T inf", b"T -inf", b"T ", b"T 1e999"])
 def test_time_sync_needs_a_finite_float(text: bytes) -> None:
-    assert parse_request([text]).kind == "unknown"
+    assert parse_request([text]).kind == "time_sync_failed"
 
 
 def test_reference_data_parsing() -> None:

@@ -4,6 +4,7 @@
     eyehil emulate --link tcp --port 5555           # pyserial socket://127.0.0.1:5555
     eyehil emulate --link pty --mode iscan --rate 120
     eyehil emulate --link zmq [--port 50020] [--lsl]   # Pupil Core Network API (+ an LSL outlet), docs/zmq.md
+    eyehil emulate --link opengaze [--port 4242] [--gaze-method guestrin]   # Gazepoint Open Gaze API, docs/opengaze.md
     eyehil emulate --scene blignaut2014 --write-geometry blignaut.toml   # the host's setup file
 
 It prints a line ``url: <what a host opens>`` once the link is up. The simulated subject follows the host's
@@ -33,7 +34,7 @@ LINKS: dict[str, str] = {
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("emulate", help="run a virtual eye tracker on a pseudo-terminal, TCP or USB/IP link",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--link", choices=sorted([*LINKS, "zmq"]), default="pty", help="transport (default pty)")
+    p.add_argument("--link", choices=sorted([*LINKS, "zmq", "opengaze"]), default="pty", help="transport (default pty)")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (tcp, usbip; default 127.0.0.1)")
     p.add_argument("--port", type=int, default=0, help="port (tcp default: any free port; usbip default 3240)")
     p.add_argument("--scene", default="guestrin2006", help=f"preset ({', '.join(preset_names())}) or TOML path")
@@ -44,12 +45,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--head", default="", help="head pose, e.g. 'x=30,z=-40,yaw=5' (mm, deg)")
     p.add_argument("--script", choices=["stimulus", "demo"], default="stimulus", help="subject behaviour")
     p.add_argument("--mode", choices=["native", "iscan"], default="native", help="protocol (default native)")
-    p.add_argument("--rate", type=int, default=250, help="default sample rate, Hz (ISCAN: the rate)")
+    p.add_argument("--rate", type=int, help="default sample rate, Hz (ISCAN: the rate; default 250, opengaze 60)")
     p.add_argument("--clock", choices=["real", "fast"], default="real", help="real time or as fast as possible")
     p.add_argument("--speed", type=float, default=1.0, help="real clock: device seconds per wall second")
     p.add_argument("--behaviour", default="", help="e.g. 'latency=0.2,jitter=0.05,blinks=0.3' (s, deg, Hz)")
     p.add_argument("--write-geometry", metavar="FILE", help="write the host's tracker geometry (TOML) for the scene")
     p.add_argument("--lsl", action="store_true", help="zmq: also open an LSL outlet of type Gaze (needs pylsl)")
+    p.add_argument("--record-dir", metavar="DIR", help="zmq: where `R` writes recording folders (never outside)")
+    p.add_argument("--lsl-layout", choices=["eyehil", "pupil_relay"], default="eyehil",
+                   help="zmq --lsl: eyehil's channels, or Pupil Capture's LSL relay name and channels")
+    p.add_argument("--gaze-method", choices=["auto", "guestrin", "blignaut"], default="auto",
+                   help="opengaze: the gaze estimator calibrated (default: by the scene's LEDs)")
     p.add_argument("--duration", type=float, help="stop after this many seconds (default: until interrupted)")
     p.add_argument("--view", action="store_true", help="also serve the live web view (eyehil view) of this device")
     p.add_argument("--view-port", type=int, default=8765, help="--view: port of the page (default 8765; 0 = any)")
@@ -62,7 +68,8 @@ def options(args: argparse.Namespace) -> DeviceOptions:
     """`DeviceOptions` from the command line."""
     base = DeviceOptions(scene=args.scene, eyes=args.eyes, eye=args.eye, sides=args.sides or "", seed=args.seed,
                          script=args.script,
-                         mode=args.mode, rate_hz=args.rate, clock=args.clock, speed=args.speed)
+                         mode=args.mode, rate_hz=args.rate or (60 if args.link == "opengaze" else 250),
+                         clock=args.clock, speed=args.speed)
     query = "&".join(part for part in (args.head, args.behaviour) if part).replace(",", "&")
     return options_from_query(query, base)
 
@@ -84,7 +91,14 @@ def make_runner(opts: DeviceOptions, args: argparse.Namespace):
     if args.link == "zmq":
         from eyehil.emulator.device.pupil.server import server_for
 
-        return server_for(opts, args.host, args.port or 50020, lsl=args.lsl)
+        return server_for(opts, args.host, args.port or 50020, lsl=args.lsl, lsl_layout=args.lsl_layout,
+                          record_dir=args.record_dir)
+    if args.link == "opengaze":
+        from eyehil.emulator.device.opengaze.server import server_for as opengaze_server
+
+        if args.lsl:
+            raise ValueError("--lsl needs --link zmq")
+        return opengaze_server(opts, args.host, args.port or 4242, method=args.gaze_method)
     if args.lsl:
         raise ValueError("--lsl needs --link zmq")
     return LinkRunner(build_device(opts), make_link(args.link, args.host, args.port))

@@ -17,6 +17,15 @@ Channel metadata follow the XDF gaze meta-data conventions, as Pupil Capture's L
 for each tracked eye i (Pupil's ids: 0 right, 1 left) and LED l. Eye-image pixels and the screen's
 normalised coordinates are those of the ZeroMQ datums (`zmq_datums`, `zmq_calibration`).
 
+With ``layout="pupil_relay"`` the stream is named and laid out as Pupil Capture's LSL relay (pupil-labs
+`pupil_capture_lsl_relay`, outlet v2): name ``pupil_capture``, type ``Gaze``, 22 channels: confidence,
+norm_pos_x/y, gaze_point_3d_x/y/z (mm; here the gaze point on the screen in the scene frame), then per eye 0
+and 1 eye_center{i}_3d_x/y/z and gaze_normal{i}_x/y/z (NaN: the facade publishes no 3-D eye model), and
+diameter{i}_2d (px), diameter{i}_3d (mm; the anatomical pupil, NaN when not detected).
+
+The source id is stable across restarts of the same device (`stable_source_id`: a hash of what defines the
+device), so that a recorder (LabRecorder) finds the stream again after a restart.
+
 Timestamps are explicit: each sample carries its exposure's mid-exposure time, mapped from the device clock
 to LSL's `local_clock` at the push: t_lsl = local_clock() - (device now - t_exposure) / speed.
 """
@@ -30,6 +39,16 @@ import numpy as np
 from eyehil.emulator.device.clock import Clock
 from eyehil.emulator.device.pupil.datums import EyeWindow
 from eyehil.emulator.device.pupil.gaze import Block
+
+LAYOUTS = ("eyehil", "pupil_relay")
+
+
+def stable_source_id(*identity: object) -> str:
+    """``eyehil-<12 hex digits>`` of `identity` (the scene, eyes, head, address ... of a device): the same
+    device gets the same id after a restart."""
+    import hashlib
+
+    return "eyehil-" + hashlib.sha256(repr(identity).encode()).hexdigest()[:12]
 
 
 class LslUnavailableError(ImportError):
@@ -75,6 +94,33 @@ def gaze_channels(eye_ids: tuple[int, ...], n_leds: int) -> list[Channel]:
     return out
 
 
+def relay_channels() -> list[Channel]:
+    """Pupil Capture's LSL relay gaze channels (see the module docstring), in sample order."""
+    out = [Channel("confidence", "both", "Confidence", "normalized"),
+           *(Channel(f"norm_pos_{a}", "both", f"Screen{a.upper()}", "normalized", "world") for a in "xy"),
+           *(Channel(f"gaze_point_3d_{a}", "both", f"Direction{a.upper()}", "mm", "world") for a in "xyz")]
+    for kind, label in (("Position", "eye_center{}_3d_{}"), ("Position", "gaze_normal{}_{}")):
+        out += [Channel(label.format(i, a), ("right", "left")[i], kind + a.upper(), "mm", "world")
+                for i in range(2) for a in "xyz"]
+    out += [Channel(f"diameter{i}_2d", ("right", "left")[i], "Diameter", "pixels", f"eye{i}") for i in range(2)]
+    out += [Channel(f"diameter{i}_3d", ("right", "left")[i], "Diameter", "mm", f"eye{i}") for i in range(2)]
+    return out
+
+
+def relay_rows(block: Block, eye_ids: tuple[int, ...], screen_centre: np.ndarray, screen_mm: tuple[float, float],
+               pupil_mm: float) -> np.ndarray:
+    """Samples (N, 22) of a mapped block in `relay_channels` order."""
+    n = len(block.time_us)
+    out = np.full((n, 22), np.nan)
+    out[:, 0], out[:, 1:3] = block.gaze_confidence, block.gaze
+    x_mm, y_mm = (0.5 - block.gaze[:, 0]) * screen_mm[0], (block.gaze[:, 1] - 0.5) * screen_mm[1]
+    out[:, 3:6] = screen_centre + np.stack([x_mm, y_mm, np.zeros(n)], axis=1)
+    for e, eye_id in enumerate(eye_ids):
+        out[:, 18 + eye_id] = block.diameter[:, e]
+        out[:, 20 + eye_id] = np.where(np.isfinite(block.diameter[:, e]), pupil_mm, np.nan)
+    return out
+
+
 def block_rows(block: Block) -> np.ndarray:
     """Samples (N, channels) of a mapped block, in `gaze_channels` order."""
     n, e = block.confidence.shape
@@ -89,11 +135,20 @@ class GazeOutlet:
     """The outlet; `push` one `zmq_gaze.Block` at a time, `close` when done."""
 
     def __init__(self, windows: list[EyeWindow], n_leds: int, rate_hz: float, clock: Clock, *,
-                 name: str = "eyehil", source_id: str | None = None) -> None:
-        """An outlet for the eyes of `windows` with `n_leds` glints each; `clock`: the device clock."""
+                 name: str = "eyehil", source_id: str | None = None, layout: str = "eyehil",
+                 screen: tuple[np.ndarray, tuple[float, float]] | None = None, pupil_mm: float = float("nan")
+                 ) -> None:
+        """An outlet for the eyes of `windows` with `n_leds` glints each; `clock`: the device clock; `layout`
+        "pupil_relay" (name ``pupil_capture``) needs `screen` (centre mm, size mm) and the pupil diameter."""
+        if layout not in LAYOUTS:
+            raise ValueError(f"LSL layout must be one of {LAYOUTS}, got {layout!r}")
         self._lsl = load_pylsl()
-        self.clock = clock
-        self.channels = gaze_channels(tuple(w.eye_id for w in windows), n_leds)
+        self.clock, self.layout, self.eye_ids = clock, layout, tuple(w.eye_id for w in windows)
+        self.screen, self.pupil_mm = screen, pupil_mm
+        if layout == "pupil_relay":
+            name, self.channels = "pupil_capture", relay_channels()
+        else:
+            self.channels = gaze_channels(self.eye_ids, n_leds)
         info = self._lsl.StreamInfo(name=name, type="Gaze", channel_count=len(self.channels),
                                     nominal_srate=float(rate_hz), channel_format=self._lsl.cf_double64,
                                     source_id=source_id or name)
@@ -119,7 +174,9 @@ class GazeOutlet:
         """Push the block's samples with their explicit timestamps."""
         if self._outlet is None or len(block.time_us) == 0:
             return
-        self._outlet.push_chunk(block_rows(block), self.lsl_times(block.time_us).tolist())
+        rows = (relay_rows(block, self.eye_ids, self.screen[0], self.screen[1], self.pupil_mm)
+                if self.layout == "pupil_relay" else block_rows(block))
+        self._outlet.push_chunk(rows, self.lsl_times(block.time_us).tolist())
         self.pushed += len(block.time_us)
 
     def close(self) -> None:

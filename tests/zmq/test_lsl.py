@@ -58,3 +58,37 @@ def test_inlet_receives_gaze_stream(server) -> None:
         inlet.close_stream()
         del inlet
     eventually(lambda: srv.outlet.pushed > 2)
+
+
+def test_source_id_is_stable_across_restarts_of_the_same_device(server) -> None:
+    first = server(scene="guestrin2006", lsl=True)
+    source, port = first.outlet_source_id, first.options.port
+    first.close()
+    again = server(scene="guestrin2006", lsl=True)
+    assert again.options.port == port and again.outlet_source_id == source
+    assert source.startswith("eyehil-")
+    assert server(scene="blignaut2014", lsl=True).outlet_source_id != source
+
+
+def test_pupil_relay_layout(server) -> None:
+    srv = server(scene="blignaut2014", rate_hz=100, lsl=True, lsl_layout="pupil_relay")
+    streams = pylsl.resolve_byprop("source_id", srv.outlet_source_id, timeout=10)
+    assert streams and streams[0].name() == "pupil_capture" and streams[0].type() == "Gaze"
+    inlet = pylsl.StreamInlet(streams[0])
+    try:
+        channels = _channels(inlet.info(timeout=10))
+        labels = [c["label"] for c in channels]
+        assert labels[:6] == ["confidence", "norm_pos_x", "norm_pos_y", "gaze_point_3d_x", "gaze_point_3d_y",
+                              "gaze_point_3d_z"]
+        assert labels[6:9] == ["eye_center0_3d_x", "eye_center0_3d_y", "eye_center0_3d_z"]
+        assert labels[12:15] == ["gaze_normal0_x", "gaze_normal0_y", "gaze_normal0_z"]
+        assert labels[18:] == ["diameter0_2d", "diameter1_2d", "diameter0_3d", "diameter1_3d"]
+        assert channels[21] == {"label": "diameter1_3d", "eye": "left", "type": "Diameter", "unit": "mm",
+                                "coordinate_system": "eye1"}
+        sample, _stamp = inlet.pull_sample(timeout=10)
+        values = dict(zip(labels, sample, strict=True))
+        assert values["diameter0_2d"] > 10 and values["diameter1_2d"] > 10 and 2 < values["diameter0_3d"] < 8
+        assert math.isnan(values["gaze_point_3d_x"])  # not calibrated
+    finally:
+        inlet.close_stream()
+        del inlet

@@ -41,10 +41,11 @@ def _until(sub, t_end: float) -> None:
 def _finish(device: Device, sub) -> dict:
     """Stop the calibration; the result.v2 payload (asserting the notifications' order)."""
     assert device.request_calibration_stop() == "OK"
-    wait_for(sub, topic_is("notify.calibration.stopped"))
     outcome = wait_for(sub, lambda m: m.topic in ("notify.calibration.successful", "notify.calibration.failed"), 30)
     assert outcome.topic == "notify.calibration.successful", outcome.payload.get("reason")
-    return wait_for(sub, topic_is("notify.calibration.result.v2")).payload
+    result = wait_for(sub, topic_is("notify.calibration.result.v2")).payload
+    wait_for(sub, topic_is("notify.calibration.stopped"))  # after the outcome (docs/zmq.md)
+    return result
 
 
 def _gaze_near(sub, topic: str, target: tuple[float, float]) -> dict:

@@ -6,5 +6,6 @@
 - `capture`: what Pupil Capture does with backbone messages (no sockets, no threads);
 - `calibration`: screen-marker calibration with the host estimators as gazers;
 - `datums`: Pupil time and the `pupil.<id>.2d` / `glint.<id>` datums; `gaze`: gaze datums;
+- `eye3d`: the 3-D eye model (`pupil.<id>.3d`, the 3-D parts of `gaze.3d.*`) from the simulated eyes;
 - `frames`: `frame.eye.<id>` images rendered on their own thread.
 """

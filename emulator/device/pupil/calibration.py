@@ -25,6 +25,10 @@ Gazers, chosen per scene (`fit`):
   six targets or more, else model 2 (four or more), else model 1 (``GazerBlignaut``);
 - one LED and one eye: no estimator of `eyehil.drivers.gaze` calibrates it without the eye's distance, so
   ``calibration.failed``.
+
+`fit(..., method=)` forces one: "guestrin" (two LEDs or more) or "blignaut" (both eyes); the Open Gaze facade
+lets the device options choose. `Gazer.map_eyes` gives each eye's own estimate (Blignaut's binocular one to
+both).
 """
 
 from __future__ import annotations
@@ -163,6 +167,16 @@ class Gazer:
         return {"eyes": fits if self.class_name == "GazerGuestrin" else {"01": plain(self.calibrations[0].params)},
                 "n_targets": self.n_targets, "leds": self.leds}
 
+    def map_eyes(self, pupil: np.ndarray, glints: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Gaze of each eye (N, E, 2) screen mm (NaN where unusable) and its validity (N, E); Blignaut's one
+        binocular estimate is given to both eyes."""
+        if self.class_name == "GazerBlignaut":
+            gaze, used = self.map(pupil, glints, valid)
+            return np.repeat(gaze[:, None], used.shape[1], axis=1), used & np.isfinite(gaze).all(-1)[:, None]
+        per_eye = np.stack([c.estimate(EyeSamples(pupil[:, e], glints[:, e], valid[:, e]))
+                            for e, c in enumerate(self.calibrations)], axis=1)  # (N, E, 2)
+        return per_eye, valid & np.isfinite(per_eye).all(-1)
+
     def map(self, pupil: np.ndarray, glints: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Gaze (N, 2) screen mm (NaN where unusable) and which eyes were used (N, E), from samples as in
         `Session.add_samples` (glints of the first `leds` LEDs)."""
@@ -171,9 +185,7 @@ class Gazer:
                                     EyeSamples(pupil[:, 1], glints[:, 1], valid[:, 1]))
             used = np.repeat(both.valid[:, None], 2, axis=1)
             return self.calibrations[0].estimate(both), used
-        per_eye = np.stack([c.estimate(EyeSamples(pupil[:, e], glints[:, e], valid[:, e]))
-                            for e, c in enumerate(self.calibrations)], axis=1)  # (N, E, 2)
-        used = valid & np.isfinite(per_eye).all(-1)
+        per_eye, used = self.map_eyes(pupil, glints, valid)
         with np.errstate(invalid="ignore"):
             gaze = np.nansum(np.where(used[..., None], per_eye, 0.0), 1) / used.sum(1)[:, None]
         return gaze, used
@@ -183,15 +195,25 @@ def _blignaut_model(n_targets: int) -> int:
     return 3 if n_targets >= 6 else 2 if n_targets >= 4 else 1
 
 
-def fit(fixations: Fixations, scene: Scene, eye_ids: tuple[int, ...]) -> Gazer | str:
-    """The gazer for `scene` fitted on `fixations`, or why it cannot be (see the module docstring)."""
+METHODS = ("auto", "guestrin", "blignaut")
+
+
+def fit(fixations: Fixations, scene: Scene, eye_ids: tuple[int, ...], method: str = "auto") -> Gazer | str:
+    """The gazer for `scene` fitted on `fixations`, or why it cannot be (see the module docstring); `method`
+    "auto" chooses by the scene, "guestrin" (two LEDs or more) and "blignaut" (both eyes) force one."""
     leds = len(scene.leds)
-    if leds == 1 and len(eye_ids) == 1:
+    if method not in METHODS:
+        return f"unknown gaze method {method!r}"
+    if method == "auto" and leds == 1 and len(eye_ids) == 1:
         return "one LED and one eye: no gazer (Blignaut needs both eyes, Guestrin two LEDs)"
+    if method == "guestrin" and leds < 2:
+        return "Guestrin needs two LEDs or more"
+    if method == "blignaut" and len(eye_ids) != 2:
+        return "Blignaut needs both eyes"
     f = fixations
     if len(f.targets_mm) == 0:
         return "no calibration target with pupil data after the settling time"
-    if leds == 1:
+    if method == "blignaut" or (method == "auto" and leds == 1):
         usable = int(f.valid.all(-1).sum())
         est = BlignautEstimator.from_model(_blignaut_model(usable))
         result = est.calibrate(BinocularSamples(*(EyeSamples(f.pupil[:, e], f.glints[:, e, :1], f.valid[:, e])

@@ -2,22 +2,27 @@
 
 `Capture.on_message(topic, payload)` reacts to one message and returns the payloads to publish:
 
-- ``notify.calibration.should_start`` -> ``calibration.started``; a new `zmq_calibration.Session`;
+- ``notify.calibration.should_start`` -> ``calibration.started``; a new `zmq_calibration.Session` with a
+  screen-marker calibration (`_markers`) that stops by itself unless a client shows its own targets;
 - ``notify.calibration.add_ref_data {ref_data: [{norm_pos, timestamp}, ...]}``: reference data (screen,
   normalised, origin bottom-left; Pupil time); a new target position also makes the simulated subject look
   there at its first timestamp (or now, if that is past): the emulator's stand-in for the screen (at most
   `MAX_TARGETS` new positions per message and per calibration);
 - ``notify.eyehil.stimulus {norm_pos, timestamp?}`` (this emulator's own): show a target without reference
   data; during a calibration it is a target until the next one;
-- ``notify.calibration.should_stop`` -> ``calibration.stopped``, then (the fit runs on a worker thread;
-  `poll` returns the outcome) ``calibration.successful`` and ``calibration.result.v2 {gazer_class_name,
-  params}``, or ``calibration.failed {reason}``; gaze is then mapped with the new gazer;
+- ``notify.calibration.should_stop``: the fit runs on a worker thread; `poll` returns the outcome,
+  ``calibration.successful`` and ``calibration.result.v2 {gazer_class_name, params}``, or
+  ``calibration.failed {reason}``, then ``calibration.stopped`` (Pupil Capture sends ``stopped`` first; the
+  PsychoPy ioHub Pupil Labs backend takes a ``stopped`` before ``successful`` for an aborted setup); gaze is
+  then mapped with the new gazer;
 - ``notify.frame_publishing.set_format {format}`` and ``notify.start_plugin {name: "Frame_Publisher",
   args: {format}}`` -> ``frame_publishing.started {format}``; ``notify.stop_plugin {name:
   "Frame_Publisher"}`` -> ``frame_publishing.stopped``;
 - ``notify.recording.should_start {session_name}`` / ``should_stop`` -> ``recording.started`` / ``stopped``;
-- ``annotation``: kept (`annotations`, the latest `MAX_ANNOTATIONS`), and while recording into a directory,
-  appended to ``<record_dir>/<session>/annotations.jsonl`` (one JSON object per line).
+- ``annotation``: kept (`annotations`: the latest `MAX_ANNOTATIONS` within `MAX_ANNOTATIONS_BYTES` of JSON
+  text; one over `MAX_ANNOTATION_BYTES` is refused), and while recording into a directory, appended to
+  ``<record_dir>/<session>/annotations.jsonl`` (one JSON object per line) beside ``info.player.json``; the
+  session folder is never outside `record_dir`.
 
 Anything else is ignored. `counters` counts what was refused.
 """
@@ -34,6 +39,8 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Any, TextIO
 
+import numpy as np
+
 from eyehil.emulator.device.pupil.calibration import MAX_TARGETS, Gazer, Session, fit, norm_to_screen
 from eyehil.emulator.device.pupil.datums import PupilTime
 from eyehil.emulator.device.stimulus import stimulus_problem
@@ -41,6 +48,11 @@ from eyehil.emulator.scene import Scene
 from eyehil.protocols.pupil import FRAME_FORMATS, RAW, norm_pos_of, notification, parse_ref_data
 
 MAX_ANNOTATIONS = 100_000
+MAX_ANNOTATION_BYTES = 1 << 20  # one annotation (its JSON text); larger ones are refused
+MAX_ANNOTATIONS_BYTES = 64 << 20  # all kept annotations; the oldest go first
+MARKER_S = 1.0  # the screen-marker calibration: each marker shown this long
+MARKER_LEAD_S = 0.3  # ... the first one this long after `C`
+MAX_MARKERS = 9
 FRAME_PUBLISHER = "Frame_Publisher"
 
 
@@ -64,11 +76,15 @@ class Capture:
         self.session: Session | None = None
         self.gazer: Gazer | None = None
         self.recording: str | None = None
-        self._annotations: deque[dict[str, Any]] = deque(maxlen=MAX_ANNOTATIONS)
+        self._annotations: deque[tuple[dict[str, Any], int]] = deque()  # (annotation, its size in bytes)
+        self._annotation_bytes = 0
+        self._markers_stop_s: float | None = None  # a screen-marker calibration runs until then
+        self._marker_queue: list[tuple[tuple[float, float], float]] = []  # markers still to show (mm, onset s)
         self._lock = threading.Lock()  # annotations are read by other threads
         self.counters: Counter[str] = Counter()
         self._shown: tuple[float, float] | None = None
         self._file: TextIO | None = None
+        self._info: dict[str, Any] | None = None
         self._fit: Future | None = None
         self._executor: ThreadPoolExecutor | None = None
         self._handlers: dict[str, Callable[[dict[str, Any]], list[dict[str, Any]]]] = {
@@ -111,6 +127,7 @@ class Capture:
         return float(self.time.of_us(t_us))
 
     def _add_ref_data(self, payload: dict[str, Any]) -> list[dict[str, Any]]:
+        self._client_targets()
         refs, refused = parse_ref_data(payload)
         self.counters["ref_data_refused"] += refused
         shown = 0
@@ -127,6 +144,7 @@ class Capture:
         return []
 
     def _stimulus(self, payload: dict[str, Any]) -> list[dict[str, Any]]:
+        self._client_targets()
         norm, ts = norm_pos_of(payload), _number(payload.get("timestamp", self.time.now()))
         if norm is None or ts is None:
             self.counters["targets_refused"] += 1
@@ -146,28 +164,62 @@ class Capture:
     # --- calibration ------------------------------------------------------------------------
     def _calibration_start(self, payload: dict[str, Any]) -> list[dict[str, Any]]:
         self.session, self._shown = Session(self.settle_s), None
+        self._markers()
         return [self._note("calibration.started")]
+
+    def _markers(self) -> None:
+        """Pupil Capture's screen-marker calibration: the scene's targets (at most 3 x 3 of its grid), each
+        shown for MARKER_S from MARKER_LEAD_S on; the subject looks at each; the calibration stops by itself
+        after the last (`poll`). Reference data or a stimulus from a client replace it (`_client_targets`)."""
+        screen = self.scene.screen
+        cols, rows = screen.grid
+        grid = screen.targets().reshape(cols, rows, 3)
+        pick_c = np.unique(np.linspace(0, cols - 1, min(cols, 3)).round()).astype(int)
+        pick_r = np.unique(np.linspace(0, rows - 1, min(rows, 3)).round()).astype(int)
+        points = [screen.to_screen(grid[c, r]) for r in pick_r for c in pick_c][:MAX_MARKERS]
+        start = self.time.now() + MARKER_LEAD_S
+        for k, p in enumerate(points):
+            xy, onset = (float(p[0]), float(p[1])), start + k * MARKER_S
+            self.session.add_ref(xy, onset)
+            self.session.add_ref(xy, onset + MARKER_S - 0.05)
+            self._marker_queue.append((xy, onset))
+        self._markers_stop_s = start + len(points) * MARKER_S
+
+    def _client_targets(self) -> None:
+        """A client shows its own targets: the screen markers of this session are dropped."""
+        if self._markers_stop_s is not None and self.session is not None:
+            self.session, self._markers_stop_s = Session(self.settle_s), None
+            self._marker_queue.clear()
 
     def _calibration_stop(self, payload: dict[str, Any]) -> list[dict[str, Any]]:
         if self.session is None:
             self.counters["stop_without_start"] += 1
             return []
-        fixations, self.session = self.session.fixations(self.time.now()), None
+        fixations, self.session, self._markers_stop_s = self.session.fixations(self.time.now()), None, None
+        self._marker_queue.clear()
         if self._executor is None:
             self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="eyehil-zmq-fit")
         self._fit = self._executor.submit(fit, fixations, self.scene, self.eye_ids)
-        return [self._note("calibration.stopped")]
+        return []  # calibration.stopped follows the outcome (`poll`)
 
     def poll(self) -> list[dict[str, Any]]:
-        """The outcome of a finished calibration fit (successful + result.v2, or failed), once."""
+        """The end of a screen-marker calibration (calibration.stopped), or the outcome of a finished fit
+        (successful + result.v2, or failed), once."""
+        now = self.time.now()
+        while self._marker_queue and self._marker_queue[0][1] <= now + MARKER_LEAD_S / 2:
+            xy, onset = self._marker_queue.pop(0)  # each marker when its time comes: one solve at a time
+            self.show(xy, self.time.to_us(onset))
+        if self._markers_stop_s is not None and now >= self._markers_stop_s:
+            return self._calibration_stop({})
         if self._fit is None or not self._fit.done():
             return []
         outcome, self._fit = self._fit.result(), None
         if isinstance(outcome, str):
-            return [self._note("calibration.failed", reason=outcome)]
+            return [self._note("calibration.failed", reason=outcome), self._note("calibration.stopped")]
         self.gazer = outcome
         return [self._note("calibration.successful", method=outcome.class_name),
-                self._note("calibration.result.v2", gazer_class_name=outcome.class_name, params=outcome.params)]
+                self._note("calibration.result.v2", gazer_class_name=outcome.class_name, params=outcome.params),
+                self._note("calibration.stopped")]
 
     # --- frames -------------------------------------------------------------------------------
     def _set_format(self, payload: dict[str, Any]) -> list[dict[str, Any]]:
@@ -202,7 +254,12 @@ class Capture:
         if self.record_dir is not None:
             folder = self.record_dir / self.recording
             try:
+                if not folder.resolve().is_relative_to(self.record_dir.resolve()):  # never outside record_dir
+                    raise OSError(f"{folder} lies outside {self.record_dir}")
                 folder.mkdir(parents=True, exist_ok=True)
+                self._info = {"recording_name": self.recording, "recording_software_name": "eyehil",
+                              "start_time_synced_s": self.time.now(), "duration_s": 0.0}
+                self._write_info(folder)
                 self._file = (folder / "annotations.jsonl").open("a", encoding="utf-8")
                 path = str(folder)
             except OSError:
@@ -215,17 +272,36 @@ class Capture:
             return []
         name, self.recording = self.recording, None
         self._close_file()
+        if self._info is not None and self.record_dir is not None:
+            self._info["duration_s"] = self.time.now() - self._info["start_time_synced_s"]
+            try:
+                self._write_info(self.record_dir / name)
+            except OSError:
+                self.counters["recording_errors"] += 1
+            self._info = None
         return [self._note("recording.stopped", session_name=name)]
+
+    def _write_info(self, folder: Path) -> None:
+        """The recording's `info.player.json` (name, software, start in Pupil time, duration s)."""
+        (folder / "info.player.json").write_text(json.dumps(self._info, indent=1), encoding="utf-8")
 
     def _annotation(self, payload: dict[str, Any]) -> list[dict[str, Any]]:
         record = {k: v for k, v in payload.items() if k != RAW}
         record["recording"] = self.recording
+        text = json.dumps(record, default=repr)
+        if len(text) > MAX_ANNOTATION_BYTES:
+            self.counters["annotations_refused"] += 1
+            return []
         with self._lock:
-            self._annotations.append(record)
+            self._annotations.append((record, len(text)))
+            self._annotation_bytes += len(text)
+            while len(self._annotations) > MAX_ANNOTATIONS or self._annotation_bytes > MAX_ANNOTATIONS_BYTES:
+                self._annotation_bytes -= self._annotations.popleft()[1]
+                self.counters["annotations_evicted"] += 1
         self.counters["annotations"] += 1
         if self._file is not None:
             try:
-                self._file.write(json.dumps(record, default=repr) + "\n")
+                self._file.write(text + "\n")
                 self._file.flush()
             except OSError:
                 self.counters["recording_errors"] += 1
@@ -235,7 +311,7 @@ class Capture:
     def annotations(self) -> list[dict[str, Any]]:
         """A copy of the annotations kept (any thread)."""
         with self._lock:
-            return list(self._annotations)
+            return [a for a, _ in self._annotations]
 
     def _close_file(self) -> None:
         if self._file is not None:

@@ -27,6 +27,7 @@ from eyehil.emulator.device.camera import Camera, Exposures, Selection
 from eyehil.emulator.device.clock import Clock
 from eyehil.emulator.device.pupil.capture import Capture
 from eyehil.emulator.device.pupil.datums import EyeWindow, PupilTime, exposure_datums, sample_arrays
+from eyehil.emulator.device.pupil.eye3d import EyeModel3d, pupil_3d_datums
 from eyehil.emulator.device.pupil.frames import FramePublisher
 from eyehil.emulator.device.pupil.gaze import BATCH_S, GazeStream
 from eyehil.emulator.device.subject import Subject
@@ -44,7 +45,7 @@ class DeviceThread:
     def __init__(self, context: zmq.Context, endpoint: str, sub: zmq.Socket, subject: Subject, clock: Clock,
                  time: PupilTime, windows: list[EyeWindow], capture: Capture, *, rate_hz: int,
                  frames: FramePublisher | None = None, frame_every: int = 1, outlet: Any = None,
-                 hwm: int = 1000) -> None:
+                 hwm: int = 1000, surface_name: str = "screen") -> None:
         """Publish to the XSUB at `endpoint`; `sub`: the SUB already connected and subscribed (the server
         checked that messages reach it)."""
         scene = subject.solver.scene
@@ -54,8 +55,11 @@ class DeviceThread:
         tracked = tuple(Eye(w.eye_id) for w in windows)
         self.camera = Camera(subject, tuple(int(v) for v in scene.camera.resolution_px), tracked)
         self._selection = Selection(tracked, len(scene.leds))
-        self.gaze = GazeStream(windows, time, scene.screen.size)
+        self.eye3d = EyeModel3d.of(subject.solver)
+        self.gaze = GazeStream(windows, time, scene.screen.size, eye3d=self.eye3d, screen_centre=scene.screen.centre,
+                               surface_name=surface_name)
         self.counters: Counter[str] = Counter()
+        self._seq: Counter[str] = Counter()  # per topic, the next sequence number
         self.failure: Exception | None = None
         self._sub = sub
         self._pub = context.socket(zmq.PUB)
@@ -122,7 +126,12 @@ class DeviceThread:
         self._publish(self.capture.on_message(topic, payload))
 
     def _publish(self, payloads: list[dict[str, Any]]) -> None:
+        """Publish, each payload with its topic's sequence number `seq` (0, 1, 2 ... per topic; an extra key
+        Pupil clients ignore, so that a subscriber tells skipped from dropped)."""
         for payload in payloads:
+            topic = payload["topic"]
+            payload["seq"] = self._seq[topic]
+            self._seq[topic] += 1
             self._pub.send_multipart(pack(payload))
         self.counters["published"] += len(payloads)
 
@@ -138,17 +147,22 @@ class DeviceThread:
         if due <= 0:
             return
         exp = self.camera.take(due)
-        pupils = []
+        pupils, pupils_3d = [], []
+        datums_2d = [exposure_datums(exp, n, self.windows, self.time) for n in range(len(exp))]
+        found = np.array([[d["confidence"] > 0 for d in datums[0::2]] for datums in datums_2d])
+        datums_3d = pupil_3d_datums(exp.batch.centre, found, self.eye3d, self.windows,
+                                    [datums[0::2] for datums in datums_2d])
         for n in range(len(exp)):
-            datums = exposure_datums(exp, n, self.windows, self.time)
-            self._publish(datums)
-            pupils.append(datums[0::2])
+            self._publish(datums_2d[n])
+            self._publish(datums_3d[n])
+            pupils.append(datums_2d[n][0::2])
+            pupils_3d.append(datums_3d[n])
             self._offer_frame(exp, n)
         self.counters["exposures"] += len(exp)
         if self.capture.session is not None:
             self.capture.session.add_samples(np.asarray(self.time.of_us(exp.time_us)), *sample_arrays(exp))
         if self.capture.gazer is not None or self.outlet is not None:
-            self.gaze.add(exp, pupils)
+            self.gaze.add(exp, pupils, pupils_3d)
 
     def _offer_frame(self, exp: Exposures, n: int) -> None:
         frame_id = int(exp.batch.frame_id[n])

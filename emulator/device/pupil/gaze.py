@@ -7,7 +7,9 @@ it has published in batches: when the oldest waiting exposure is `BATCH_S` old (
 Gaze datum (`eyehil.protocols.pupil.gaze_datum`): topic ``gaze.2d.<ids>.`` with the Pupil ids of the eyes used
 (``gaze.2d.01.`` binocular, ``gaze.2d.0.`` right eye only, ``gaze.2d.1.`` left eye only), `norm_pos` on the
 screen (`zmq_calibration`), confidence the mean of the pupils used, the exposure's timestamp, and
-`base_data`, the pupil datums used. Exposures that no eye maps give no gaze datum.
+`base_data`, the pupil datums used. Exposures that no eye maps give no gaze datum. With a 3-D eye model
+(`zmq_eye3d`) each gaze datum also has a ``gaze.3d.<ids>.`` twin (base data: the ``pupil.<id>.3d`` datums),
+and each batch one ``surfaces.<name>`` datum with those gaze datums on the screen surface.
 """
 
 from __future__ import annotations
@@ -18,8 +20,9 @@ from typing import Any
 import numpy as np
 
 from eyehil.emulator.device.camera import Exposures
-from eyehil.emulator.device.pupil.calibration import Gazer, screen_to_norm
+from eyehil.emulator.device.pupil.calibration import Gazer, norm_to_screen, screen_to_norm
 from eyehil.emulator.device.pupil.datums import EyeWindow, PupilTime, sample_arrays
+from eyehil.emulator.device.pupil.eye3d import EyeModel3d, gaze_3d_datum, surface_datum
 from eyehil.protocols.enums import GlintFlags, PupilFlags
 from eyehil.protocols.pupil import gaze_datum
 
@@ -59,16 +62,23 @@ def _eye_image(exps: list[Exposures], windows: list[EyeWindow]) -> dict[str, np.
 class GazeStream:
     """Exposures waiting to be mapped, with their pupil datums; see the module docstring."""
 
-    def __init__(self, windows: list[EyeWindow], time: PupilTime, screen_mm: tuple[float, float]) -> None:
-        """`windows`: the eye images (eyes in the exposures' order); `screen_mm`: the screen's size (W, H)."""
+    def __init__(self, windows: list[EyeWindow], time: PupilTime, screen_mm: tuple[float, float], *,
+                 eye3d: EyeModel3d | None = None, screen_centre: np.ndarray | None = None,
+                 surface_name: str = "screen") -> None:
+        """`windows`: the eye images (eyes in the exposures' order); `screen_mm`: the screen's size (W, H);
+        with `eye3d` and the screen's centre (scene mm) also ``gaze.3d.*`` and ``surfaces.<surface_name>``."""
         self.windows, self.time, self.screen_mm = windows, time, screen_mm
+        self.eye3d, self.screen_centre, self.surface_name = eye3d, screen_centre, surface_name
         self._exps: list[Exposures] = []
         self._datums: list[list[dict[str, Any]]] = []  # per exposure, the pupil datum of each eye
+        self._datums_3d: list[list[dict[str, Any]]] = []
 
-    def add(self, exp: Exposures, pupil_datums: list[list[dict[str, Any]]]) -> None:
-        """Exposures just published and their pupil datums (one list of E datums per exposure)."""
+    def add(self, exp: Exposures, pupil_datums: list[list[dict[str, Any]]],
+            pupil_3d: list[list[dict[str, Any]]] | None = None) -> None:
+        """Exposures just published and their pupil datums (one list of E datums per exposure), 2-D and 3-D."""
         self._exps.append(exp)
         self._datums.extend(pupil_datums)
+        self._datums_3d.extend(pupil_3d or [[] for _ in pupil_datums])
 
     def due(self, now_us: int) -> bool:
         """True when the waiting exposures should be mapped now."""
@@ -80,6 +90,7 @@ class GazeStream:
         if not self._exps:
             return [], None
         exps, datums, self._exps, self._datums = self._exps, self._datums, [], []
+        datums_3d, self._datums_3d = self._datums_3d, []
         t_us = np.concatenate([e.time_us for e in exps])
         n = len(t_us)
         gaze, used = np.full((n, 2), np.nan), np.zeros((n, len(self.windows)), bool)
@@ -92,11 +103,18 @@ class GazeStream:
         ok = np.isfinite(gaze).all(-1) & used.any(-1)
         with np.errstate(invalid="ignore"):
             conf = np.where(ok, (eye["confidence"] * used).sum(-1) / used.sum(-1), 0.0)
-        out = []
+        out, out_3d = [], []
         for i in np.flatnonzero(ok):
             eyes = np.flatnonzero(used[i])
-            out.append(gaze_datum([self.windows[e].eye_id for e in eyes], float(self.time.of_us(int(t_us[i]))),
-                                  gaze[i], float(conf[i]), [datums[i][e] for e in eyes]))
+            ids, ts = [self.windows[e].eye_id for e in eyes], float(self.time.of_us(int(t_us[i])))
+            out.append(gaze_datum(ids, ts, gaze[i], float(conf[i]), [datums[i][e] for e in eyes]))
+            if self.eye3d is not None and datums_3d[i]:
+                point = self.screen_centre + np.array([*norm_to_screen(self.screen_mm, gaze[i]), 0.0])
+                out_3d.append(gaze_3d_datum(ids, ts, gaze[i], float(conf[i]), [datums_3d[i][e] for e in eyes],
+                                            [self.eye3d.centres[e] for e in eyes], point))
+        out += out_3d
+        if out_3d:
+            out.append(surface_datum(self.surface_name, out_3d[-1]["timestamp"], out_3d))
         block = Block(t_us, eye["pupil"], eye["diameter"], eye["confidence"], eye["glints"],
                       np.where(ok[:, None], gaze, np.nan), conf)
         return out, block

@@ -1,6 +1,7 @@
 """Pupil Remote: the REQ/REP command socket of the ZeroMQ facade, on its own thread ("eyehil-zmq-remote").
 
-Every request gets exactly one reply (`eyehil.protocols.pupil` lists them); what a request sets off goes out on the
+Every request gets exactly one reply (`eyehil.protocols.pupil` lists them; requests are matched by their first
+character, as in Pupil Capture); what a request sets off goes out on the
 backbone through this thread's own PUB (connected to the XSUB), where the device thread receives it like
 any client's notification:
 
@@ -10,10 +11,12 @@ any client's notification:
 | ``SUB_PORT`` / ``PUB_PORT`` | the XPUB / XSUB port | |
 | ``R [name]`` / ``r`` | ``OK`` | ``notify.recording.should_start {session_name}`` / ``should_stop`` |
 | ``C`` / ``c`` | ``OK`` | ``notify.calibration.should_start`` / ``should_stop`` |
-| ``T <float>`` | ``Timesync successful.`` | (Pupil time := the float, now) |
+| ``T <float>`` | ``Timesync successful.`` (1) | (Pupil time := the float, now) |
 | ``t`` | ``repr`` of Pupil time (s) | |
 | ``v`` | `eyehil.protocols.pupil.VERSION` | |
 | anything else, or not UTF-8 | ``Unknown command.`` | |
+
+(1) Without a finite float: ``'<text>' cannot be converted to float.``
 
 A multipart message that `eyehil.protocols.pupil.unpack` refuses (bad msgpack, non-string keys, too deep, too big,
 topic not UTF-8) is answered ``Malformed message: <reason>`` and not forwarded; a message larger than
@@ -42,6 +45,7 @@ from eyehil.protocols.pupil import (
     notification,
     pack,
     parse_request,
+    timesync_failed_reply,
     unpack,
 )
 
@@ -79,6 +83,9 @@ class PupilRemote:
         elif kind == "time_sync":
             self.time.set_now(request.argument)
             return REPLY_TIMESYNC
+        elif kind == "time_sync_failed":
+            self.counters["unknown"] += 1
+            return timesync_failed_reply(request.argument)
         elif kind == "time_query":
             return repr(self.time.now())
         elif kind == "version":

@@ -58,6 +58,8 @@ class ServerOptions:
     seed: int = 0  # image noise
     record_dir: str | None = None  # where recordings keep their annotations (None: memory only)
     lsl: bool = False  # also open an LSL outlet of type Gaze (`lsl_outlet`, needs pylsl)
+    surface_name: str = "screen"  # the screen's surface topic: surfaces.<name>
+    lsl_layout: str = "eyehil"  # or "pupil_relay": Pupil Capture's LSL relay name and channels
 
     def __post_init__(self) -> None:
         if not 1 <= self.rate_hz <= MAX_RATE_HZ:
@@ -83,8 +85,13 @@ class PupilServer:
 
     @property
     def outlet_source_id(self) -> str:
-        """The LSL outlet's source id: eyehil-<host>-<XSUB port> (unique per running server)."""
-        return f"eyehil-{self.options.host}-{self.pub_port}"
+        """The LSL outlet's source id: the same for the same device (scene, eyes, eye anatomy, head, address
+        asked for, layout) after a restart (`lsl_outlet.stable_source_id`)."""
+        from eyehil.emulator.device.lsl import stable_source_id
+
+        solver, o = self.subject.solver, self.options
+        return stable_source_id(solver.scene.name, solver.scene.sides, repr(solver.eye), solver.head, o.host,
+                                o.port, o.lsl_layout)
 
     @property
     def url(self) -> str:
@@ -146,16 +153,22 @@ class PupilServer:
                                     seed=o.seed, hwm=o.hwm)
             self._parts.append(frames)
         if o.lsl:
+            import numpy as np
+
             from eyehil.emulator.device.lsl import GazeOutlet
 
-            self.outlet = GazeOutlet(windows, len(solver.scene.leds), o.rate_hz, self.clock, name="eyehil",
-                                     source_id=self.outlet_source_id)
+            scene = solver.scene
+            self.outlet = GazeOutlet(windows, len(scene.leds), o.rate_hz, self.clock, name="eyehil",
+                                     source_id=self.outlet_source_id, layout=o.lsl_layout,
+                                     screen=(scene.screen.centre, scene.screen.size),
+                                     pupil_mm=2.0 * float(np.asarray(solver.eye.pupil_radius).reshape(-1)[0]))
             self._parts.append(self.outlet)
         capture = Capture(solver.scene, eye_ids, self.time, lambda xy, t_us: device.show(xy, t_us),
                           settle_s=o.settle_s, frame_format=o.frame_format, record_dir=o.record_dir)
         device = DeviceThread(self.context, xsub, sub, self.subject, self.clock, self.time, windows, capture,
                               rate_hz=o.rate_hz, frames=frames, outlet=self.outlet, hwm=o.hwm,
-                              frame_every=max(1, round(o.rate_hz / o.frame_rate_hz)) if frames else 1)
+                              frame_every=max(1, round(o.rate_hz / o.frame_rate_hz)) if frames else 1,
+                              surface_name=o.surface_name)
         self._parts.append(device.capture)
         self._parts.append(device)
         self.device = device
