@@ -15,7 +15,6 @@ bad file is refused with an error naming the key and the problem (`SceneError`).
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
@@ -128,19 +127,15 @@ def load_scene(name_or_path: str | Path) -> Scene:
     if path.suffix == ".toml" or path.exists():
         if not path.is_file():
             raise SceneError(f"scene file {path} does not exist")
-        text, origin = path.read_text(encoding="utf-8"), str(path)
+        raw, origin = path.read_bytes(), str(path)
     else:
         res = resources.files("emulator") / "scenes" / f"{name_or_path}.toml"
         if not res.is_file():
             raise SceneError(f"unknown scene {name_or_path!r}; presets: {', '.join(preset_names())}")
-        text, origin = res.read_text(encoding="utf-8"), f"preset {name_or_path}"
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"{origin}: not valid TOML: {exc}") from exc
-    from emulator.scene_toml import scene_from_dict
+        raw, origin = res.read_bytes(), f"preset {name_or_path}"
+    from emulator.scene_toml import scene_from_toml_bytes
 
-    return scene_from_dict(data, origin)
+    return scene_from_toml_bytes(raw, origin)
 
 
 def preset_names() -> list[str]:
