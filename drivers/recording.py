@@ -34,7 +34,7 @@ MAX_LINE = 1 << 20  # characters in one record
 MAX_EYES, MAX_GLINTS = 2, 8
 _I64 = 1 << 63
 
-__all__ = ["FORMAT", "VERSION", "Recorder", "Recording", "RecordingError", "read_recording"]
+__all__ = ["FORMAT", "VERSION", "Recorder", "Recording", "RecordingError", "parse_recording_bytes", "read_recording"]
 
 
 def _eye_record(e) -> dict[str, Any]:
@@ -127,7 +127,7 @@ class Recording:
         return len(self.arrays["seq"])
 
 
-def _parse(lines: list[str], path: Path) -> tuple[dict, list[dict], list[dict], dict | None]:
+def _parse(lines: list[str], path: str | Path) -> tuple[dict, list[dict], list[dict], dict | None]:
     """Header, targets, samples, end; a broken LAST line is tolerated (a cut-short file)."""
     records = []
     for number, line in enumerate(lines, 1):
@@ -230,9 +230,14 @@ def _arrays(samples: list[dict]) -> dict[str, np.ndarray]:
 def read_recording(path: str | Path) -> Recording:
     """Read a recording written by `Recorder`; `RecordingError` if it is not one."""
     path = Path(path)
+    return parse_recording_bytes(path.read_bytes(), path)
+
+
+def parse_recording_bytes(raw: bytes, origin: str | Path = "recording") -> Recording:
+    """A recording from the bytes of its file (`origin` names it in errors); `RecordingError` if it is not one."""
     try:
-        text = path.read_bytes().decode("utf-8")
+        text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise RecordingError(f"{path}: not UTF-8 ({exc.reason} at byte {exc.start})") from None
-    header, targets, samples, end = _parse(text.splitlines(), path)
+        raise RecordingError(f"{origin}: not UTF-8 ({exc.reason} at byte {exc.start})") from None
+    header, targets, samples, end = _parse(text.splitlines(), origin)
     return Recording(header, targets, end, _arrays(samples))
