@@ -82,7 +82,10 @@ def test_scene_loader_raises_only_scene_error(raw: bytes) -> None:
         scene_from_toml_bytes(raw)
 
 
-@pytest.mark.parametrize("raw", [b"\x01\x11\x00\x05\x00\x00\x00\x00", b"\x01\x11\x00\x05\x00\x00\x00\x00\xff\xff\xff\xff"])
+DEVLIST_HEADER = b"\x01\x11\x00\x05\x00\x00\x00\x00"
+
+
+@pytest.mark.parametrize("raw", [DEVLIST_HEADER, DEVLIST_HEADER + b"\xff\xff\xff\xff"])
 def test_usbip_devlist_decoder_raises_only_usbip_error(raw: bytes) -> None:
     with pytest.raises(UsbipError):
         decode_devlist_reply(raw)
