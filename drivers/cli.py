@@ -26,6 +26,8 @@ from drivers.calibration import METHODS, Plan, calibrate, gaze, grid, screen_to_
 from drivers.client import Tracker, open_tracker
 from drivers.errors import TrackerError
 from drivers.frames import FrameReader, reader_for
+from drivers.links import open_link
+from drivers.links.fault import wrap
 from drivers.recording import Recorder
 from drivers.setup_file import load_geometry
 from protocols.enums import Eye, EyeSelect, StreamSelect
@@ -37,6 +39,8 @@ def _common() -> argparse.ArgumentParser:
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("url", help="device path, socket://host:port, loop://?..., spy://URL, usbip://host:port")
     common.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for anything (default 2)")
+    common.add_argument("--fault", metavar="SPEC", help="inject faults into what the device sends, e.g. "
+                        "drop=0.01,corrupt=0.001,delay=5ms,duplicate=0.005,reorder=0.005 (drivers.links.fault)")
     return common
 
 
@@ -103,7 +107,14 @@ def _reported(run: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Na
 
 
 def _open(args: argparse.Namespace) -> Tracker:
-    return open_tracker(args.url, timeout=args.timeout)
+    if not getattr(args, "fault", None):
+        return open_tracker(args.url, timeout=args.timeout)
+    link = wrap(open_link(args.url, timeout=0.0), args.fault)
+    try:
+        return Tracker(link, url=args.url, timeout=args.timeout)
+    except BaseException:
+        link.close()
+        raise
 
 
 @_reported

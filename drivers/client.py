@@ -217,6 +217,20 @@ class Tracker:
         flags = StimulusFlags.VISIBLE if visible else StimulusFlags(0)
         return self.exchange(Stimulus(target_id, x_mm, y_mm, flags)).received.header.timestamp_us
 
+    def reconnect(self, link=None) -> DeviceInfo:
+        """After a `LinkError`: continue on `link` (a new byte stream: a partial frame is dropped) or, by default,
+        on the same link (a wrapper or port that recovered), then handshake again (the stream state is read back).
+
+        The receive side keeps its sequence baseline and counters, so frames the device sent while the link
+        was down are counted in `lost_frames` and flagged on the next sample (`lost_before`): a recording
+        marks the gap.
+        """
+        if link is not None:
+            self.wire.link = link
+            self.wire.receiver.framer.reset()
+        self.wire.replies.clear()
+        return self.handshake()
+
     def _info(self) -> DeviceInfo:
         if self.info is None:
             raise TrackerError("no handshake yet")
