@@ -18,9 +18,9 @@ Faults apply to the device -> host direction, frame by frame (a frame is everyth
 - ``after=N``: the first N frames pass untouched (a clean handshake);
 - ``seed=S``: the generator's seed (default 0).
 
-`log` records what happened to which frame, by the frame's sequence number (`FaultLog`; None for a frame
-too damaged to tell): tests compare the host's counters with it. The wrapper's clock (`now`, seconds) is
-injectable, so a test runs on simulated time.
+`log` records what happened to which frame (a diagnostic tool: its lists grow with the run), by the
+frame's sequence number (`FaultLog`; None for a frame too damaged to tell): tests compare the host's
+counters with it. The wrapper's clock (`now`, seconds) is injectable, so a test runs on simulated time.
 """
 
 from __future__ import annotations
@@ -93,6 +93,8 @@ class FaultLog:
     reordered: list[int | None] = field(default_factory=list)
     outage: list[int | None] = field(default_factory=list)  # frames lost while disconnected
     disconnects: int = 0
+    in_order: list[int] = field(default_factory=list)  # seqs delivered intact after every lower one delivered
+    last_in_order: int | None = None  # the highest seq delivered intact
 
 
 class FaultLink:
@@ -163,29 +165,30 @@ class FaultLink:
             log.outage.append(index)
             return
         if log.frames <= spec.after:
-            self._ready += frame
+            self._deliver(frame, index)
             return
         r = self.rng.random
         if r() < spec.drop:
             log.dropped.append(index)
             return
+        intact = True
         if r() < spec.corrupt:
             log.corrupted.append(index)
-            frame = _flip_one_bit(frame, self.rng)
+            frame, intact = _flip_one_bit(frame, self.rng), False
         if r() < spec.delay_p and spec.delay_s > 0:
             log.delayed.append(index)
-            self._held.append((self.now() + spec.delay_s, index, frame))
+            self._held.append((self.now() + spec.delay_s, index if intact else None, frame))
             return
         copies = 2 if r() < spec.duplicate else 1
         if copies == 2:
             log.duplicated.append(index)
         if self._swap is None and r() < spec.reorder:
             log.reordered.append(index)
-            self._swap = (index, frame * copies)
+            self._swap = (index if intact else None, frame * copies)
             return
-        self._ready += frame * copies
+        self._deliver(frame * copies, index if intact else None)
         if self._swap is not None:
-            self._ready += self._swap[1]
+            self._deliver(*reversed(self._swap))
             self._swap = None
 
     def _release_held(self) -> None:
@@ -193,8 +196,16 @@ class FaultLink:
         due = [h for h in self._held if h[0] <= now]
         if due:
             self._held = [h for h in self._held if h[0] > now]
-            for _, _, frame in due:
-                self._ready += frame
+            for _, seq, frame in due:
+                self._deliver(frame, seq)
+
+    def _deliver(self, frames: bytes, seq: int | None) -> None:
+        """Hand `frames` (one frame, or the same frame twice) to the host; `seq` None if damaged."""
+        self._ready += frames
+        last = self.log.last_in_order
+        if seq is not None and (last is None or seq > last):
+            self.log.in_order.append(seq)
+            self.log.last_in_order = seq
 
 
 def _seq_of(wire: bytes) -> int | None:
