@@ -20,6 +20,8 @@ A new scheme is one module with a callable ``opener(url: str, *, timeout: float)
 function, or a dotted attribute such as a classmethod ``Class.from_url``) and one line in `SCHEMES`.
 `loop://` is the only scheme served by the emulator package (an in-process device for tests, imported
 by name only when used); the host still sees nothing but bytes.
+`fault.FaultLink` wraps any SerialLike and injects faults into what it reads (tests, ``--fault`` on the
+host subcommands).
 """
 
 from __future__ import annotations
