@@ -15,9 +15,10 @@ until told otherwise. `observe(times)` returns the image features at exposure ti
 - blinking (scripted, or spontaneous at `blink_rate_hz`): no features.
 
 `observe` never waits for a solve unless `exact_wait_s` > 0 (a device on the fast clock, whose time is
-virtual, waits that long at most for the exact solution or the grid); with the default 0, samples the
-grid cannot give yet (the first half second after the first STIMULUS) carry no features and are
-counted in `unsolved_samples`. A peer's target is range-checked (`look_at`).
+virtual, waits that long at most for the exact solution or the grid); with the default 0 the grid is
+built when the subject is (a fixation of a new target is interpolated in it until its exact solve is
+done), and samples it could not give (only if it is missing) carry no features, counted in
+`unsolved_samples`. A peer's target is range-checked (`look_at`).
 """
 
 from __future__ import annotations
@@ -115,6 +116,8 @@ class Subject:
             solver.field  # noqa: B018 - and the grid its movements are interpolated in
         else:
             solver.exact(np.array([start]))  # where the subject looks until the first stimulus
+            if exact_wait_s == 0:
+                solver.field  # noqa: B018 - never waiting later: the grid must be there before the first stimulus
 
     @property
     def screen_centre(self) -> np.ndarray:
