@@ -122,6 +122,8 @@ class Tracker:
             raise IncompatibleDeviceError(f"device speaks versions {info.protocol_min}..{info.protocol_max}, "
                                      f"host speaks {PROTOCOL_VERSION}")
         self.info = info
+        sensor_bytes = info.camera_width * info.camera_height * 2  # the largest image it can send (MONO16)
+        self.wire.assembler.max_image_bytes = min(self.wire.assembler.max_image_bytes, max(sensor_bytes, 1))
         self.streaming = self.status().state is DeviceState.STREAMING
         return info
 
