@@ -180,7 +180,9 @@ def _check_sample(s: dict, where: str) -> None:
     """Raise `RecordingError` unless `s` is a sample record `_arrays` can take."""
     for key in ("seq", "frame_id", "device_us", "host_us", "lost_before", "skipped_before"):
         _int(s.get(key), f"{where}: {key}")
-    if s.get("target_id") is not None:
+    if "target_id" not in s:
+        raise RecordingError(f"{where}: target_id missing (null for none)")
+    if s["target_id"] is not None:
         _int(s["target_id"], f"{where}: target_id")
     eyes = s.get("eyes")
     if not isinstance(eyes, list) or len(eyes) > MAX_EYES:
