@@ -10,12 +10,12 @@ to tests/corpus/<parser>/ (replayed by tests/test_reliability_parsers.py).
 
 Parsers and their documented errors:
 
-- native: `protocols.stream.NativeReceiver.feed` (never raises) on a byte stream, decoding every frame
-- iscan: `protocols.iscan.IscanParser.feed` (never raises) with 1..4 outputs, plain and confirmed
-- pupil: `protocols.pupil.unpack`, `parse_request`, `parse_ref_data` -> `PupilMessageError`
+- native: `eyehil.protocols.stream.NativeReceiver.feed` (never raises) on a byte stream, decoding every frame
+- iscan: `eyehil.protocols.iscan.IscanParser.feed` (never raises) with 1..4 outputs, plain and confirmed
+- pupil: `eyehil.protocols.pupil.unpack`, `parse_request`, `parse_ref_data` -> `PupilMessageError`
 - usbip: op header, devlist reply, import busid, URB header -> `UsbipError`
-- recording: `drivers.recording.parse_recording_bytes` -> `RecordingError`
-- scene: `emulator.scene_toml.scene_from_toml_bytes` -> `SceneError`
+- recording: `eyehil.drivers.recording.parse_recording_bytes` -> `RecordingError`
+- scene: `eyehil.emulator.scene.loader.scene_from_toml_bytes` -> `SceneError`
 
 Environment: FUZZ_INPUTS (per parser), FUZZ_PARSERS (comma list), FUZZ_SEED.
 """
@@ -34,19 +34,19 @@ from pathlib import Path
 
 import msgpack
 
-from drivers.errors import RecordingError
-from drivers.recording import parse_recording_bytes
-from emulator.scene import SceneError
-from emulator.scene_toml import scene_from_toml_bytes
-from protocols.enums import Eye, PupilFlags
-from protocols.iscan import IscanParser, encode_sample
-from protocols.messages import Configure, GetInfo, Ping, Stimulus
-from protocols.native import encode
-from protocols.pupil import PupilMessageError, parse_ref_data, parse_request, unpack
-from protocols.replies import Ack, ErrorReply
-from protocols.samples import EyeFeatures, Features, FrameChunk, Glint
-from protocols.stream import NativeReceiver
-from protocols.usbip import (
+from eyehil.drivers.errors import RecordingError
+from eyehil.drivers.recording import parse_recording_bytes
+from eyehil.emulator.scene import SceneError
+from eyehil.emulator.scene.loader import scene_from_toml_bytes
+from eyehil.protocols.enums import Eye, PupilFlags
+from eyehil.protocols.iscan import IscanParser, encode_sample
+from eyehil.protocols.messages import Configure, GetInfo, Ping, Stimulus
+from eyehil.protocols.native import encode
+from eyehil.protocols.pupil import PupilMessageError, parse_ref_data, parse_request, unpack
+from eyehil.protocols.replies import Ack, ErrorReply
+from eyehil.protocols.samples import EyeFeatures, Features, FrameChunk, Glint
+from eyehil.protocols.stream import NativeReceiver
+from eyehil.protocols.usbip.messages import (
     OP_HEADER,
     OpHeader,
     UsbipError,
@@ -56,7 +56,7 @@ from protocols.usbip import (
     encode_devlist_reply,
     encode_import_request,
 )
-from protocols.usbip_urb import URB_HEADER_SIZE, CmdSubmit, decode_urb_header
+from eyehil.protocols.usbip.urb import URB_HEADER_SIZE, CmdSubmit, decode_urb_header
 
 CORPUS = Path(__file__).resolve().parent.parent / "tests" / "corpus"
 HANG_S = 1.0
@@ -165,7 +165,7 @@ def _recording_seeds() -> list[bytes]:
 
 
 def _scene_seeds() -> list[bytes]:
-    preset = Path(__file__).resolve().parent.parent / "emulator" / "scenes"
+    preset = Path(__file__).resolve().parent.parent / "eyehil.emulator" / "scenes"
     return [p.read_bytes() for p in sorted(preset.glob("*.toml"))[:3]]
 
 

@@ -24,15 +24,15 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers.client import open_tracker
-from protocols.enums import StreamSelect
+from eyehil.drivers.client import open_tracker
+from eyehil.protocols.enums import StreamSelect
 
 ROOT = Path(__file__).resolve().parent.parent
 DEVICE = """
 import sys, time
-from emulator.device.build import DeviceOptions, build_device
-from emulator.device.links import LinkRunner
-from emulator.device.pty_link import PtyLink
+from eyehil.emulator.device.build import DeviceOptions, build_device
+from eyehil.emulator.device.links.base import LinkRunner
+from eyehil.emulator.device.links.pty import PtyLink
 with LinkRunner(build_device(DeviceOptions(rate_hz=int(sys.argv[1]), clock="real")), PtyLink()) as runner:
     print(runner.url, flush=True)
     sys.stdin.read()  # until the parent closes our stdin
@@ -40,8 +40,8 @@ with LinkRunner(build_device(DeviceOptions(rate_hz=int(sys.argv[1]), clock="real
 HOSTILE = """
 import os, random, struct, sys, time
 sys.path.insert(0, sys.argv[3])
-from protocols.messages import Configure, GetInfo, Stimulus
-from protocols.native import encode
+from eyehil.protocols.messages import Configure, GetInfo, Stimulus
+from eyehil.protocols.native import encode
 fd = os.open(sys.argv[1], os.O_WRONLY | os.O_NOCTTY)
 rate, rng, seq, sent = float(sys.argv[2]), random.Random(1), 1, 0
 start = time.monotonic()

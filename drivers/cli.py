@@ -1,7 +1,7 @@
 """Host subcommands: `eyehil info | stream | calibrate | record URL`.
 
 URL: a device path (/dev/ttyACM0, a pseudo-terminal), socket://host:port, loop://?options (an
-in-process emulator), spy://<URL> (hex dump), usbip://host:port (see `drivers.links`).
+in-process emulator), spy://<URL> (hex dump), usbip://host:port (see `eyehil.drivers.links`).
 
     eyehil info /dev/pts/5
     eyehil stream socket://127.0.0.1:5555 --rate 500 --duration 2
@@ -22,15 +22,15 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from drivers.calibration import METHODS, Plan, calibrate, gaze, grid, screen_to_stimulus
-from drivers.client import Tracker, open_tracker
-from drivers.errors import TrackerError
-from drivers.frames import FrameReader, reader_for
-from drivers.links import open_link
-from drivers.links.fault import wrap
-from drivers.recording import Recorder
-from drivers.setup_file import load_geometry
-from protocols.enums import Eye, EyeSelect, StreamSelect
+from eyehil.drivers.calibration import METHODS, Plan, calibrate, gaze, grid, screen_to_stimulus
+from eyehil.drivers.client import Tracker, open_tracker
+from eyehil.drivers.errors import TrackerError
+from eyehil.drivers.frames import FrameReader, reader_for
+from eyehil.drivers.links import open_link
+from eyehil.drivers.links.fault import wrap
+from eyehil.drivers.recording import Recorder
+from eyehil.drivers.setup_file import load_geometry
+from eyehil.protocols.enums import Eye, EyeSelect, StreamSelect
 
 EYES = {"right": EyeSelect.RIGHT, "left": EyeSelect.LEFT, "both": EyeSelect.BOTH}
 
@@ -40,7 +40,7 @@ def _common() -> argparse.ArgumentParser:
     common.add_argument("url", help="device path, socket://host:port, loop://?..., spy://URL, usbip://host:port")
     common.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for anything (default 2)")
     common.add_argument("--fault", metavar="SPEC", help="inject faults into what the device sends, e.g. "
-                        "drop=0.01,corrupt=0.001,delay=5ms,duplicate=0.005,reorder=0.005 (drivers.links.fault)")
+                        "drop=0.01,corrupt=0.001,delay=5ms,duplicate=0.005,reorder=0.005 (eyehil.drivers.links.fault)")
     return common
 
 
@@ -89,7 +89,7 @@ def register_record(sub: argparse._SubParsersAction) -> None:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    """Add every host subcommand (eyehil_cli registers them one by one)."""
+    """Add every host subcommand (eyehil.cli registers them one by one)."""
     for add in (register_info, register_stream, register_calibrate, register_record):
         add(sub)
 

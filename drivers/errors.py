@@ -1,7 +1,7 @@
 """The host's exception tree: everything `drivers` raises on purpose derives from `DriverError`.
 
     DriverError                           root of the drivers package's errors
-     ├── RecordingError (ValueError)      a recording file is not in the format (drivers.recording)
+     ├── RecordingError (ValueError)      a recording file is not in the format (eyehil.drivers.recording)
      └── TrackerError                     anything that went wrong talking to a tracker
      ├── LinkError (OSError)              the link could not be opened, or failed/closed while in use
      │    └── SchemeUnavailableError      unknown URL scheme, or its module is missing
@@ -11,13 +11,13 @@
      └── CalibrationError                 too few usable samples, or the estimator could not fit
 
 Faults on the wire (CRC errors, lost frames, malformed frames) are not exceptions: the client counts
-them (`drivers.client.HostStats`) and goes on, as the protocol's receiver rules require. Malformed
-recording files raise `drivers.recording.RecordingError` (a ValueError), not a TrackerError.
+them (`eyehil.drivers.client.HostStats`) and goes on, as the protocol's receiver rules require. Malformed
+recording files raise `eyehil.drivers.recording.RecordingError` (a ValueError), not a TrackerError.
 """
 
 from __future__ import annotations
 
-from protocols.errors import ErrorCode
+from eyehil.protocols.errors import ErrorCode
 
 
 class DriverError(Exception):

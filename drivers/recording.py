@@ -4,7 +4,7 @@ Format (docs/recording.md): UTF-8, one JSON object per line; the first line is t
 "target" and "sample" records in arrival order, then one "end" record. A file cut short (the host
 crashed) lacks the end record and may end with a partial line: `read_recording` keeps every complete
 record and reports ``complete=False``. Whatever the file holds, the reader raises only `RecordingError`
-(`drivers.errors`): every record is checked against the format before use (types, integer ranges,
+(`eyehil.drivers.errors`): every record is checked against the format before use (types, integer ranges,
 finite numbers, nesting); lines longer than `MAX_LINE` characters are refused.
 
     with Recorder("run.jsonl", tracker) as rec:        # header: device info, configuration, clock sync
@@ -24,9 +24,9 @@ from typing import Any
 
 import numpy as np
 
-from drivers.errors import RecordingError
-from drivers.wire import Sample, host_now_us
-from protocols.replies import Status
+from eyehil.drivers.errors import RecordingError
+from eyehil.drivers.wire import Sample, host_now_us
+from eyehil.protocols.replies import Status
 
 FORMAT = "eyehil-recording"
 VERSION = 1

@@ -14,11 +14,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from bench.fuzz import PARSERS, mutate, seeds
-from drivers.errors import RecordingError
-from drivers.recording import read_recording
-from emulator.scene import SceneError
-from emulator.scene_toml import scene_from_toml_bytes
-from protocols.usbip import UsbipError, decode_devlist_reply
+from eyehil.drivers.errors import RecordingError
+from eyehil.drivers.recording import read_recording
+from eyehil.emulator.scene import SceneError
+from eyehil.emulator.scene.loader import scene_from_toml_bytes
+from eyehil.protocols.usbip.messages import UsbipError, decode_devlist_reply
 
 CORPUS = Path(__file__).parent / "corpus"
 CI = settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from emulator.cli_render import safe_stem
-from eyehil_cli import main
+from eyehil.cli import main
+from eyehil.emulator.render.cli import safe_stem
 
 
 def test_scene_name_cannot_escape_the_output_folder(tmp_path: Path) -> None:
-    preset = (Path(__file__).parent.parent / "emulator" / "scenes" / "guestrin2006.toml").read_text()
+    preset = (Path(__file__).parent.parent / "eyehil.emulator" / "scenes" / "guestrin2006.toml").read_text()
     scene = tmp_path / "evil.toml"
     scene.write_text(preset.replace('name = "guestrin2006"', 'name = "../ESCAPED"'))
     out = tmp_path / "out"

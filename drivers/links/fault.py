@@ -30,7 +30,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from protocols import cobs
+from eyehil.protocols import cobs
 
 KINDS = ("drop", "duplicate", "corrupt", "delay", "reorder")
 

@@ -12,15 +12,15 @@ import numpy as np
 import pytest
 from device_helpers import CoreHost, core_device
 
-from emulator.device.clock import ManualClock
-from emulator.device.gaze import MAX_TIME_US, Kind, Timeline, clamp_time_us
-from emulator.device.links import MAX_INBOX_BYTES, MAX_REPLY_BACKLOG, LinkRunner
-from emulator.device.solver import FeatureSolver, SolveQueue
-from emulator.device.subject import Subject
-from emulator.eye.normative import normative_eye
-from emulator.scene import load_scene
-from protocols import Ack, Features, GetInfo, Start, Stimulus
-from protocols.native import encode
+from eyehil.emulator.device.clock import ManualClock
+from eyehil.emulator.device.gaze import MAX_TIME_US, Kind, Timeline, clamp_time_us
+from eyehil.emulator.device.links.base import MAX_INBOX_BYTES, MAX_REPLY_BACKLOG, LinkRunner
+from eyehil.emulator.device.solver import FeatureSolver, SolveQueue
+from eyehil.emulator.device.subject import Subject
+from eyehil.emulator.eye.normative import normative_eye
+from eyehil.emulator.scene import load_scene
+from eyehil.protocols import Ack, Features, GetInfo, Start, Stimulus
+from eyehil.protocols.native import encode
 
 GENEROUS_S = 60.0  # only bounds a hang; never decides a result
 

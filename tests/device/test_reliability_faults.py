@@ -13,15 +13,15 @@ from pathlib import Path
 
 import pytest
 
-from drivers.client import Tracker
-from drivers.errors import LinkError
-from drivers.links.fault import FaultLink, FaultSpec
-from drivers.recording import Recorder, read_recording
-from emulator.device.loop import open_loop
-from protocols.header import seq_gap
-from protocols.native import DEVICE_TYPES
-from protocols.samples import Features
-from protocols.stream import NativeReceiver, Received
+from eyehil.drivers.client import Tracker
+from eyehil.drivers.errors import LinkError
+from eyehil.drivers.links.fault import FaultLink, FaultSpec
+from eyehil.drivers.recording import Recorder, read_recording
+from eyehil.emulator.device.links.loop import open_loop
+from eyehil.protocols.header import seq_gap
+from eyehil.protocols.native import DEVICE_TYPES
+from eyehil.protocols.samples import Features
+from eyehil.protocols.stream import NativeReceiver, Received
 
 SAMPLES = 6000  # 6 s at 1 kHz (the 60 s run is the benchmark's)
 

@@ -9,11 +9,11 @@ import threading
 import pytest
 from device_helpers import CoreHost, core_device
 
-from drivers.client import MAX_DRAIN_BYTES, Tracker
-from drivers.errors import TrackerError, TrackerTimeoutError
-from drivers.links.tcp import TcpPort
-from drivers.wire import Wire
-from protocols import (
+from eyehil.drivers.client import MAX_DRAIN_BYTES, Tracker
+from eyehil.drivers.errors import TrackerError, TrackerTimeoutError
+from eyehil.drivers.links.tcp import TcpPort
+from eyehil.drivers.wire import Wire
+from eyehil.protocols import (
     Ack,
     Configure,
     DeviceState,
@@ -27,9 +27,9 @@ from protocols import (
     PupilFlags,
     Start,
 )
-from protocols.enums import Eye, PixelFormat
-from protocols.native import HOST_TYPES, encode
-from protocols.stream import NativeReceiver, Received
+from eyehil.protocols.enums import Eye, PixelFormat
+from eyehil.protocols.native import HOST_TYPES, encode
+from eyehil.protocols.stream import NativeReceiver, Received
 
 GENEROUS_S = 60.0
 
@@ -77,7 +77,7 @@ def _honest(header, message):
     if isinstance(message, Ping):
         return [Pong(message.nonce, header.timestamp_us, 5)]
     if type(message).__name__ == "GetStatus":
-        from protocols import Status
+        from eyehil.protocols import Status
 
         return [Status()]
     return [Ack(header.seq, header.msg_type)]

@@ -13,7 +13,7 @@ pytest.importorskip("pylsl")
 
 PROBE = textwrap.dedent("""
     import os, time
-    from emulator.device.lsl_outlet import load_pylsl
+    from eyehil.emulator.device.lsl import load_pylsl
     pylsl = load_pylsl()
     outlet = pylsl.StreamOutlet(pylsl.StreamInfo("probe", "Gaze", 1, 100, pylsl.cf_double64, "probe"))
     inodes = set()

@@ -12,12 +12,12 @@ import time
 
 from usbip_helpers import RawHost, wait_closed
 
-import drivers.links.usbip_client as usbip_client
-import emulator.device.usbip_server as usbip_server
-import emulator.device.usbip_session as usbip_session
-from drivers.links.usbip_client import UsbipClient
-from protocols.usbip import OpHeader
-from protocols.usbip_urb import CmdSubmit, Direction
+import eyehil.drivers.links.usbip_client as usbip_client
+import eyehil.emulator.device.links.usbip.server as usbip_server
+import eyehil.emulator.device.links.usbip.session as usbip_session
+from eyehil.drivers.links.usbip_client import UsbipClient
+from eyehil.protocols.usbip.messages import OpHeader
+from eyehil.protocols.usbip.urb import CmdSubmit, Direction
 
 GENEROUS_S = 30.0
 
