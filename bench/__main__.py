@@ -22,6 +22,7 @@ BENCHMARKS = [
     "opengaze",  # Gazepoint Open Gaze samples at 60 and 150 Hz (bench/opengaze.py)
     "firmware",  # the firmware's C feature extractor (bench/firmware.py)
 ]
+ON_REQUEST = ["fuzz", "soak"]  # long runs (minutes to an hour): only when named
 
 
 def main() -> int:
@@ -29,9 +30,9 @@ def main() -> int:
     parser.add_argument("names", nargs="*", help=f"benchmarks to run (default all: {', '.join(BENCHMARKS)})")
     parser.add_argument("--quick", action="store_true", help="one repeat instead of three")
     args = parser.parse_args()
-    unknown = set(args.names) - set(BENCHMARKS)
+    unknown = set(args.names) - set(BENCHMARKS) - set(ON_REQUEST)
     if unknown:
-        parser.error(f"unknown benchmark(s) {', '.join(sorted(unknown))}; known: {', '.join(BENCHMARKS)}")
+        parser.error(f"unknown benchmark(s) {', '.join(sorted(unknown))}; known: {', '.join(BENCHMARKS + ON_REQUEST)}")
     repeats = 1 if args.quick else 3
     print(f"# {platform.python_implementation()} {platform.python_version()}, {os.cpu_count()} CPUs, "
           f"{platform.machine()}; best of {repeats}")

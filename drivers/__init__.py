@@ -1,7 +1,8 @@
 """The host: open a tracker by URL, talk the native protocol, calibrate gaze, record; never imports the emulator.
 
 - `client`: `open_tracker(url)` -> `Tracker` (handshake, configure, start/stop, samples, STIMULUS, clock sync);
-- `links`: URL schemes -> serial-like links (device path, socket://, loop://, spy://, usbip://);
+- `links`: URL schemes -> serial-like links (device path, socket://, loop://, spy://, usbip://), and
+  `links.fault` (a fault-injecting wrapper: drop, duplicate, corrupt, delay, reorder, disconnect; ``--fault``);
 - `wire`: the receive path (`Sample`, `HostStats`: sequence gaps, CRC errors, ...); `errors`: the exception tree;
 - `calibration` (through the device), `features` (samples -> estimator arrays), `setup_file` (the tracker's
   geometry file), `recording` (docs/recording.md), `cli` (eyehil info / stream / calibrate / record);

@@ -26,6 +26,8 @@ from eyehil.drivers.calibration import METHODS, Plan, calibrate, gaze, grid, scr
 from eyehil.drivers.client import Tracker, open_tracker
 from eyehil.drivers.errors import TrackerError
 from eyehil.drivers.frames import FrameReader, reader_for
+from eyehil.drivers.links import open_link
+from eyehil.drivers.links.fault import wrap
 from eyehil.drivers.recording import Recorder
 from eyehil.drivers.setup_file import load_geometry
 from eyehil.protocols.enums import Eye, EyeSelect, StreamSelect
@@ -37,6 +39,8 @@ def _common() -> argparse.ArgumentParser:
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("url", help="device path, socket://host:port, loop://?..., spy://URL, usbip://host:port")
     common.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for anything (default 2)")
+    common.add_argument("--fault", metavar="SPEC", help="inject faults into what the device sends, e.g. "
+                        "drop=0.01,corrupt=0.001,delay=5ms,duplicate=0.005,reorder=0.005 (eyehil.drivers.links.fault)")
     return common
 
 
@@ -103,7 +107,14 @@ def _reported(run: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Na
 
 
 def _open(args: argparse.Namespace) -> Tracker:
-    return open_tracker(args.url, timeout=args.timeout)
+    if not getattr(args, "fault", None):
+        return open_tracker(args.url, timeout=args.timeout)
+    link = wrap(open_link(args.url, timeout=0.0), args.fault)
+    try:
+        return Tracker(link, url=args.url, timeout=args.timeout)
+    except BaseException:
+        link.close()
+        raise
 
 
 @_reported

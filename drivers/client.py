@@ -12,11 +12,19 @@ Commands follow the protocol's rules: one outstanding at a time; a response miss
 `response_timeout` (0.25 s) counts as lost and the command is re-sent with a new sequence number,
 `retries` times, then `TrackerTimeoutError`; a late response to an earlier attempt is accepted. A START
 whose ACK was lost and that gets BUSY on the retry was accepted. ERROR raises `CommandRefusedError`.
-Every wait has a deadline on ``time.monotonic()``: nothing blocks forever.
+Every wait has a deadline on ``time.monotonic()``: nothing blocks forever (`drain` included).
+
+Replies are matched by what they answer, never by arrival alone: each session numbers its commands from a
+random base (`secrets`), an ACK or ERROR must name one of the command's sequence numbers AND its type, a
+PONG our random nonce; DEVICE_INFO and STATUS carry nothing to match, so GET_INFO and GET_STATUS are
+bracketed by a PING with a random nonce sent right behind them: the DEVICE_INFO (STATUS) that arrives
+last before that PONG is the answer (responses come in command order). Anything else is stale (counted,
+`stale_replies`) or mismatched (`mismatched_replies`: our seq with another type), never an answer.
 """
 
 from __future__ import annotations
 
+import secrets
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -44,19 +52,45 @@ class ClockSync:
         return device_us - self.offset_us
 
 
-def _matches(message: Message, seqs: set[int]) -> Callable[[Reply], bool]:
-    """Which reply answers `message`, sent (possibly several times) with the sequence numbers `seqs`."""
-    def match(reply: Reply) -> bool:
-        m = reply.message
-        if isinstance(m, Ack):
-            return m.acked_seq in seqs
-        if isinstance(m, ErrorReply):
-            return m.offending_seq in seqs
+MAX_DRAIN_BYTES = 4 * 1024 * 1024  # drain() reads at most this much in one call
+_SPECIFIC = {GetInfo: DeviceInfo, GetStatus: Status, Ping: Pong}  # commands answered by their own reply type
+
+
+class _Matcher:
+    """Decides which reply answers `message`, sent with the sequence numbers `seqs` (see the module docstring)."""
+
+    def __init__(self, message: Message, seqs: set[int], stats) -> None:
+        self.message, self.seqs, self.stats = message, seqs, stats
+        self.nonces: set[int] = set()  # bracketing PINGs (GET_INFO, GET_STATUS)
+        self.candidate: Reply | None = None
+
+    def __call__(self, reply: Reply) -> Reply | None:
+        """The answer, if `reply` completes it; else None (the reply was stale or is remembered)."""
+        m, kind = reply.message, type(self.message)
+        if isinstance(m, Ack | ErrorReply):
+            seq, typ = (m.acked_seq, m.acked_type) if isinstance(m, Ack) else (m.offending_seq, m.offending_type)
+            if seq not in self.seqs:
+                return self._stale()
+            if typ != self.message.TYPE or (isinstance(m, Ack) and kind in _SPECIFIC):
+                self.stats.mismatched_replies += 1
+                return None
+            return reply
         if isinstance(m, Pong):
-            return isinstance(message, Ping) and m.nonce == message.nonce
-        return (isinstance(m, DeviceInfo) and isinstance(message, GetInfo)) or (
-            isinstance(m, Status) and isinstance(message, GetStatus))
-    return match
+            if kind is Ping:
+                return reply if m.nonce == self.message.nonce else self._stale()
+            if m.nonce in self.nonces and self.candidate is not None:
+                return self.candidate
+            return self._stale()
+        if _SPECIFIC.get(kind) is type(m):
+            if self.candidate is not None:
+                self._stale()
+            self.candidate = reply
+            return None
+        return self._stale()
+
+    def _stale(self) -> None:
+        self.stats.stale_replies += 1
+        return None
 
 
 class Tracker:
@@ -65,7 +99,7 @@ class Tracker:
     def __init__(self, link, *, timeout: float = 2.0, response_timeout: float = 0.25, retries: int = 3,
                  handshake: bool = True, url: str = "") -> None:
         """Talk over `link` (SerialLike); `timeout` bounds every wait for samples (s)."""
-        self.wire, self.url = Wire(link), url
+        self.wire, self.url = Wire(link, seq0=secrets.randbits(32)), url
         self.timeout, self.response_timeout, self.retries = timeout, response_timeout, retries
         self.info: DeviceInfo | None = None
         self.configuration: Configure | None = None  # the last CONFIGURE the device accepted from this client
@@ -88,6 +122,8 @@ class Tracker:
             raise IncompatibleDeviceError(f"device speaks versions {info.protocol_min}..{info.protocol_max}, "
                                      f"host speaks {PROTOCOL_VERSION}")
         self.info = info
+        sensor_bytes = info.camera_width * info.camera_height * 2  # the largest image it can send (MONO16)
+        self.wire.assembler.max_image_bytes = min(self.wire.assembler.max_image_bytes, max(sensor_bytes, 1))
         self.streaming = self.status().state is DeviceState.STREAMING
         return info
 
@@ -102,9 +138,14 @@ class Tracker:
         A response to an earlier attempt of the same command that arrives late is accepted too.
         """
         seqs: set[int] = set()
+        match = _Matcher(message, seqs, self.wire.stats)
         for attempt in range(self.retries + 1):
             seqs.add(self.wire.send(message)[0])
-            reply = self._await(_matches(message, seqs))
+            if isinstance(message, GetInfo | GetStatus):
+                nonce = secrets.randbits(32)
+                match.nonces.add(nonce)
+                self.wire.send(Ping(nonce))
+            reply = self._await(match)
             if reply is None:
                 self.wire.stats.retries += 1
                 continue
@@ -116,16 +157,14 @@ class Tracker:
             return reply
         raise TrackerTimeoutError(f"no response to {type(message).__name__} after {self.retries + 1} attempts")
 
-    def _await(self, match: Callable[[Reply], bool]) -> Reply | None:
-        """The first reply satisfying `match` within `response_timeout`; None if none came (others are
-        dropped as stale)."""
+    def _await(self, match: Callable[[Reply], Reply | None]) -> Reply | None:
+        """The answer `match` finds within `response_timeout`; None if none came (others are counted by it)."""
         deadline = time.monotonic() + self.response_timeout
         while True:
             while self.wire.replies:
-                reply = self.wire.replies.popleft()
-                if match(reply):
-                    return reply
-                self.wire.stats.stale_replies += 1
+                answer = match(self.wire.replies.popleft())
+                if answer is not None:
+                    return answer
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 return None
@@ -137,8 +176,8 @@ class Tracker:
     def sync_clock(self, pings: int = 8) -> ClockSync:
         """Device minus host clock from `pings` PINGs, keeping the smallest round trip (docs/protocol.md, PONG)."""
         best: ClockSync | None = None
-        for nonce in range(pings):
-            reply = self.exchange(Ping(nonce))
+        for _ in range(pings):
+            reply = self.exchange(Ping(secrets.randbits(32)))
             pong: Pong = reply.message
             t1, t2 = pong.ping_timestamp_us, pong.receive_time_us
             t3, t4 = reply.received.header.timestamp_us, reply.host_us
@@ -180,6 +219,20 @@ class Tracker:
         flags = StimulusFlags.VISIBLE if visible else StimulusFlags(0)
         return self.exchange(Stimulus(target_id, x_mm, y_mm, flags)).received.header.timestamp_us
 
+    def reconnect(self, link=None) -> DeviceInfo:
+        """After a `LinkError`: continue on `link` (a new byte stream: a partial frame is dropped) or, by default,
+        on the same link (a wrapper or port that recovered), then handshake again (the stream state is read back).
+
+        The receive side keeps its sequence baseline and counters, so frames the device sent while the link
+        was down are counted in `lost_frames` and flagged on the next sample (`lost_before`): a recording
+        marks the gap.
+        """
+        if link is not None:
+            self.wire.link = link
+            self.wire.receiver.framer.reset()
+        self.wire.replies.clear()
+        return self.handshake()
+
     def _info(self) -> DeviceInfo:
         if self.info is None:
             raise TrackerError("no handshake yet")
@@ -203,10 +256,13 @@ class Tracker:
             yield self.read_sample(timeout)
             n += 1
 
-    def drain(self) -> list[Sample]:
-        """Every sample received so far (reads what is already waiting on the link, without blocking)."""
-        while self.wire.pump(0):
-            pass
+    def drain(self, max_s: float | None = None, max_bytes: int = MAX_DRAIN_BYTES) -> list[Sample]:
+        """Every sample received so far: reads what is already waiting on the link, for at most `max_s` seconds
+        (default `timeout`) and `max_bytes` (a streaming device never stops sending: it returns anyway)."""
+        deadline = time.monotonic() + (self.timeout if max_s is None else max_s)
+        budget = max_bytes
+        while budget > 0 and time.monotonic() < deadline and (n := self.wire.pump(0)):
+            budget -= n
         out = list(self.wire.samples)
         self.wire.samples.clear()
         return out

@@ -1,6 +1,8 @@
-"""The host's exception tree: everything `drivers` raises about a tracker derives from `TrackerError`.
+"""The host's exception tree: everything `drivers` raises on purpose derives from `DriverError`.
 
-    TrackerError                          anything that went wrong talking to a tracker
+    DriverError                           root of the drivers package's errors
+     ├── RecordingError (ValueError)      a recording file is not in the format (eyehil.drivers.recording)
+     └── TrackerError                     anything that went wrong talking to a tracker
      ├── LinkError (OSError)              the link could not be opened, or failed/closed while in use
      │    └── SchemeUnavailableError      unknown URL scheme, or its module is missing
      ├── TrackerTimeoutError (TimeoutError)   no response (after retries), or no sample within the timeout
@@ -18,7 +20,15 @@ from __future__ import annotations
 from eyehil.protocols.errors import ErrorCode
 
 
-class TrackerError(Exception):
+class DriverError(Exception):
+    """Root of every error the drivers package raises on purpose."""
+
+
+class RecordingError(DriverError, ValueError):
+    """A recording file is not in the format (names the line)."""
+
+
+class TrackerError(DriverError):
     """Base of every error about a tracker."""
 
 

@@ -3,7 +3,9 @@
 Format (docs/recording.md): UTF-8, one JSON object per line; the first line is the header, then
 "target" and "sample" records in arrival order, then one "end" record. A file cut short (the host
 crashed) lacks the end record and may end with a partial line: `read_recording` keeps every complete
-record and reports ``complete=False``.
+record and reports ``complete=False``. Whatever the file holds, the reader raises only `RecordingError`
+(`eyehil.drivers.errors`): every record is checked against the format before use (types, integer ranges,
+finite numbers, nesting); lines longer than `MAX_LINE` characters are refused.
 
     with Recorder("run.jsonl", tracker) as rec:        # header: device info, configuration, clock sync
         rec.target(1, 188.5, 150.5, device_us=ack_us)    # a target shown (mm, top-left origin)
@@ -22,15 +24,17 @@ from typing import Any
 
 import numpy as np
 
+from eyehil.drivers.errors import RecordingError
 from eyehil.drivers.wire import Sample, host_now_us
 from eyehil.protocols.replies import Status
 
 FORMAT = "eyehil-recording"
 VERSION = 1
+MAX_LINE = 1 << 20  # characters in one record
+MAX_EYES, MAX_GLINTS = 2, 8
+_I64 = 1 << 63
 
-
-class RecordingError(ValueError):
-    """A recording file is not in the format (names the line)."""
+__all__ = ["FORMAT", "VERSION", "Recorder", "Recording", "RecordingError", "parse_recording_bytes", "read_recording"]
 
 
 def _eye_record(e) -> dict[str, Any]:
@@ -123,24 +127,84 @@ class Recording:
         return len(self.arrays["seq"])
 
 
-def _parse(lines: list[str], path: Path) -> tuple[dict, list[dict], list[dict], dict | None]:
+def _parse(lines: list[str], path: str | Path) -> tuple[dict, list[dict], list[dict], dict | None]:
     """Header, targets, samples, end; a broken LAST line is tolerated (a cut-short file)."""
     records = []
     for number, line in enumerate(lines, 1):
         try:
-            records.append(json.loads(line))
-        except json.JSONDecodeError as exc:
+            if len(line) > MAX_LINE:
+                raise ValueError(f"line longer than {MAX_LINE} characters")
+            record = json.loads(line)
+            if not isinstance(record, dict):
+                raise ValueError("a record must be a JSON object")
+            records.append(record)
+        except (ValueError, RecursionError) as exc:
             if number == len(lines):
                 break
-            raise RecordingError(f"{path}:{number}: not JSON: {exc}") from exc
+            raise RecordingError(f"{path}:{number}: not a JSON record: {exc}") from None
     if not records or records[0].get("format") != FORMAT or records[0].get("version") != VERSION:
         raise RecordingError(f"{path}: not an {FORMAT} version {VERSION} file")
-    kinds = {"target": [], "sample": [], "end": []}
+    kinds: dict[str, list] = {"target": [], "sample": [], "end": []}
     for number, record in enumerate(records[1:], 2):
-        if record.get("type") not in kinds:
-            raise RecordingError(f"{path}:{number}: unknown record type {record.get('type')!r}")
-        kinds[record["type"]].append(record)
+        kind = record.get("type")
+        if not isinstance(kind, str) or kind not in kinds:
+            raise RecordingError(f"{path}:{number}: unknown record type {str(kind)[:40]!r}")
+        if kind == "sample":
+            _check_sample(record, f"{path}:{number}")
+        elif kind == "end" and not isinstance(record.get("stats", {}), dict):
+            raise RecordingError(f"{path}:{number}: end.stats must be an object")
+        kinds[kind].append(record)
     return records[0], kinds["target"], kinds["sample"], (kinds["end"] or [None])[-1]
+
+
+def _int(value: Any, where: str, lo: int = -_I64, hi: int = _I64 - 1) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+        raise RecordingError(f"{where}: expected an integer in [{lo}, {hi}], got {str(value)[:40]}")
+    return value
+
+
+def _num(value: Any, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not abs(value) < 1e300:
+        raise RecordingError(f"{where}: expected a finite number, got {str(value)[:40]}")
+    return float(value)
+
+
+def _pair(value: Any, where: str) -> None:
+    if not isinstance(value, list) or len(value) != 2:
+        raise RecordingError(f"{where}: expected two numbers")
+    for v in value:
+        _num(v, where)
+
+
+def _check_sample(s: dict, where: str) -> None:
+    """Raise `RecordingError` unless `s` is a sample record `_arrays` can take."""
+    for key in ("seq", "frame_id", "device_us", "host_us", "lost_before", "skipped_before"):
+        _int(s.get(key), f"{where}: {key}")
+    if "target_id" not in s:
+        raise RecordingError(f"{where}: target_id missing (null for none)")
+    if s["target_id"] is not None:
+        _int(s["target_id"], f"{where}: target_id")
+    eyes = s.get("eyes")
+    if not isinstance(eyes, list) or len(eyes) > MAX_EYES:
+        raise RecordingError(f"{where}: eyes must be a list of at most {MAX_EYES} records")
+    for e in eyes:
+        if not isinstance(e, dict):
+            raise RecordingError(f"{where}: an eye record must be an object")
+        _int(e.get("eye"), f"{where}: eye", 0, 1)
+        _int(e.get("flags"), f"{where}: flags", 0, 255)
+        _pair(e.get("centre"), f"{where}: centre")
+        _pair(e.get("axes"), f"{where}: axes")
+        _num(e.get("angle_deg"), f"{where}: angle_deg")
+        _num(e.get("confidence"), f"{where}: confidence")
+        glints = e.get("glints")
+        if not isinstance(glints, list) or len(glints) > MAX_GLINTS:
+            raise RecordingError(f"{where}: glints must be a list of at most {MAX_GLINTS} records")
+        for g in glints:
+            if not isinstance(g, dict):
+                raise RecordingError(f"{where}: a glint record must be an object")
+            _int(g.get("flags"), f"{where}: glint flags", 0, 255)
+            _num(g.get("x"), f"{where}: glint x")
+            _num(g.get("y"), f"{where}: glint y")
 
 
 def _arrays(samples: list[dict]) -> dict[str, np.ndarray]:
@@ -168,5 +232,14 @@ def _arrays(samples: list[dict]) -> dict[str, np.ndarray]:
 def read_recording(path: str | Path) -> Recording:
     """Read a recording written by `Recorder`; `RecordingError` if it is not one."""
     path = Path(path)
-    header, targets, samples, end = _parse(path.read_text(encoding="utf-8").splitlines(), path)
+    return parse_recording_bytes(path.read_bytes(), path)
+
+
+def parse_recording_bytes(raw: bytes, origin: str | Path = "recording") -> Recording:
+    """A recording from the bytes of its file (`origin` names it in errors); `RecordingError` if it is not one."""
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise RecordingError(f"{origin}: not UTF-8 ({exc.reason} at byte {exc.start})") from None
+    header, targets, samples, end = _parse(text.splitlines(), origin)
     return Recording(header, targets, end, _arrays(samples))

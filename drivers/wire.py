@@ -5,7 +5,10 @@ whatever arrives within `wait_s` seconds (waiting with select() on the link's de
 one, else with the link's own read timeout), decodes it, and sorts it: FEATURES become `Sample`s in
 `samples`, FRAME_CHUNKs are reassembled (`eyehil.protocols.images.ImageAssembler`) into `ReceivedImage`s in
 `images`, every other message goes to `replies` with its arrival time. Faults are counted, never
-raised (`HostStats`); only a failing link raises (`LinkError`). Host times are microseconds of
+raised (`HostStats`); only a failing link raises (`LinkError`). A FEATURES or FRAME_CHUNK whose seq is not
+newer than the last one (a duplicate or a late frame, already counted lost when its successor came) never
+reaches the application: it is dropped and counted (`duplicates_dropped`). Reassembly allocates at most
+`max_image_bytes` per image (`eyehil.protocols.images.ImageAssembler`). Host times are microseconds of
 ``time.monotonic_ns()``.
 """
 
@@ -97,10 +100,13 @@ class HostStats:
     retries: int = 0  # commands re-sent after a missing response
     stale_replies: int = 0  # replies that matched no outstanding command
     samples_overflowed: int = 0  # samples discarded because nobody read them
+    duplicates_dropped: int = 0  # duplicated or late FEATURES/FRAME_CHUNKs not delivered
+    mismatched_replies: int = 0  # replies naming our command's seq with the wrong type (or type with wrong seq)
     chunks: int = 0  # FRAME_CHUNKs received
     images: int = 0  # images reassembled whole
     images_incomplete: int = 0  # images abandoned with chunks missing, or with inconsistent chunks
     images_overflowed: int = 0  # images discarded because nobody read them
+    images_refused: int = 0  # FRAME_CHUNKs claiming an image larger than the limit, or inconsistent chunking
 
     def as_dict(self) -> dict[str, int]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -175,6 +181,9 @@ class Wire:
 
     def _dispatch(self, event: Received, now: int) -> None:
         message = event.message
+        if event.out_of_order and isinstance(message, Features | FrameChunk):
+            self.stats.duplicates_dropped += 1
+            return
         if isinstance(message, FrameChunk):
             self._chunk(message, event.header, now)
             return
@@ -200,6 +209,7 @@ class Wire:
         self.stats.chunks += 1
         image = self.assembler.add(chunk)
         self.stats.images_incomplete = self.assembler.incomplete + self.assembler.inconsistent
+        self.stats.images_refused = self.assembler.refused
         if image is None:
             return
         self.stats.images += 1

@@ -3,6 +3,11 @@
 Pure helpers around `eyehil.protocols.samples.FrameChunk`. The device sends the chunks of one image in order,
 and may abandon an image (link too slow, STOP): the host's `ImageAssembler` then drops the partial
 image when a chunk of a newer frame id arrives and counts it in ``incomplete``.
+
+The host allocates an image's buffer from its first chunk's claims, so those are checked first: an image
+larger than `max_image_bytes` (default `MAX_IMAGE_BYTES`; a host that knows the sensor passes its size), or
+whose `chunk_count` cannot hold it in chunks of at most `MAX_CHUNK_DATA` bytes (or exceeds its byte
+count), is refused and counted in ``refused``, before any allocation.
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ from eyehil.protocols.header import MAX_PAYLOAD
 from eyehil.protocols.samples import FrameChunk
 
 MAX_CHUNK_DATA = MAX_PAYLOAD - FrameChunk.STRUCT.size  # 4074 pixel bytes per chunk
+MAX_IMAGE_BYTES = 4096 * 4096 * 2  # 32 MiB: the largest image a host reassembles unless told otherwise
 _FORMATS = {np.dtype(np.uint8): PixelFormat.MONO8, np.dtype("<u2"): PixelFormat.MONO16}
 
 
@@ -62,20 +68,33 @@ class _Partial:
 class ImageAssembler:
     """Collects FRAME_CHUNKs (one image in progress per eye) and returns each complete image once."""
 
-    def __init__(self) -> None:
-        """Start with nothing in progress; counters ``complete``, ``incomplete``, ``inconsistent``."""
+    def __init__(self, max_image_bytes: int = MAX_IMAGE_BYTES) -> None:
+        """Start with nothing in progress; counters ``complete``, ``incomplete``, ``inconsistent``, ``refused``."""
         self._partial: dict[Eye, _Partial] = {}
+        self.max_image_bytes = max_image_bytes
         self.complete = 0
         self.incomplete = 0
         self.inconsistent = 0
+        self.refused = 0
+
+    def plausible(self, chunk: FrameChunk) -> bool:
+        """True if the image `chunk` claims may be allocated: within the size limit, not empty, and its chunk
+        count fits its size."""
+        size = chunk.image_size
+        needed = -(-size // MAX_CHUNK_DATA)
+        return 0 < size <= self.max_image_bytes and needed <= chunk.chunk_count <= size
 
     def add(self, chunk: FrameChunk) -> Image | None:
         """Take one chunk; return the image it completes, else None."""
         part = self._partial.get(chunk.eye)
         if part is not None and part.first.frame_id != chunk.frame_id:
             self.incomplete += 1
+            del self._partial[chunk.eye]
             part = None
         if part is None:
+            if not self.plausible(chunk):
+                self.refused += 1
+                return None
             part = _Partial(chunk, bytearray(chunk.image_size))
             self._partial[chunk.eye] = part
         if not _same_geometry(part.first, chunk):

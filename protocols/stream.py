@@ -3,7 +3,10 @@
 Both ends of a link use it. ``feed(bytes)`` never raises; it returns, in stream order, `Received`
 (header, message, frames lost just before it) and `Rejected` (the fault, and for a device the
 ERROR it should send back). Sequence gaps are counted by `SequenceTracker` over every frame whose
-CRC and magic were good, so a refused command still counts as received in sequence.
+CRC and magic were good, so a refused command still counts as received in sequence. A frame whose seq is
+not newer than the last one is flagged (`Received.out_of_order`): a duplicate or a late frame (at most
+`REORDER_WINDOW` behind) leaves the baseline where it was, so that the frames after it are not counted
+lost twice; one farther behind is a restarted sender and becomes the new baseline.
 Still pure: no I/O, no clock, no threads.
 """
 
@@ -33,6 +36,7 @@ class Received:
     header: Header
     message: Message
     lost_before: int = 0
+    out_of_order: bool = False  # a duplicate, late or restarted seq (see the module docstring)
 
 
 @dataclass(frozen=True, slots=True)
@@ -58,6 +62,9 @@ class LinkCounters:
     out_of_order: int = 0
 
 
+REORDER_WINDOW = 4096  # frames: a seq at most this far behind the baseline is a duplicate or late frame
+
+
 class SequenceTracker:
     """Detects gaps in one direction's sequence numbers; the first frame seen is the baseline."""
 
@@ -66,9 +73,14 @@ class SequenceTracker:
         self.last: int | None = None
 
     def update(self, seq: int) -> int:
-        """Record `seq`; return frames missing before it (0), or -1 for a duplicate/old/restarted one."""
+        """Record `seq`; return frames missing before it (0), or -1 for a duplicate/old/restarted one.
+
+        A duplicate or late frame (at most `REORDER_WINDOW` behind) keeps the baseline; a frame farther
+        behind (a restarted sender) becomes the baseline.
+        """
         gap = 0 if self.last is None else seq_gap(self.last, seq)
-        self.last = seq
+        if gap >= 0 or gap < -REORDER_WINDOW - 1:
+            self.last = seq
         return gap if gap >= 0 else -1
 
 
@@ -113,7 +125,8 @@ class NativeReceiver:
         except ProtocolError as exc:
             return self._rejected(exc)
         self.counters.rx_frames += 1
-        return Received(header, message, self._track(header.seq))
+        lost = self._track(header.seq)
+        return Received(header, message, max(lost, 0), lost < 0)
 
     def _rejected(self, exc: ProtocolError) -> Rejected:
         """Count a decoding error; frames with a trusted seq still advance the sequence."""
@@ -124,10 +137,10 @@ class NativeReceiver:
         return Rejected(exc, error_reply_for(exc))
 
     def _track(self, seq: int) -> int:
-        """Update the sequence tracker and the lost/out-of-order counters; return frames lost."""
+        """Update the sequence tracker and the lost/out-of-order counters; return frames lost (-1: out of order)."""
         gap = self.sequence.update(seq)
         if gap < 0:
             self.counters.out_of_order += 1
-            return 0
+            return -1
         self.counters.lost_frames += gap
         return gap

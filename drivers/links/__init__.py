@@ -25,7 +25,8 @@ function, or a dotted attribute such as a classmethod ``Class.from_url``) and on
 by name only when used); the host still sees nothing but bytes.
 
 Modules: `serialport` (device paths), `tcp` (socket://), `spy` (hex dump), `usbip` (usbip://) over
-`usbip_client` (a small USB/IP client).
+`usbip_client` (a small USB/IP client); `fault` (`FaultLink`: wraps any SerialLike and injects faults into
+what it reads; tests, ``--fault`` on the host subcommands).
 """
 
 from __future__ import annotations

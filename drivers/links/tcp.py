@@ -13,18 +13,21 @@ import time
 from urllib.parse import urlsplit
 
 CONNECT_TIMEOUT_S = 5.0
+WRITE_TIMEOUT_S = 5.0  # a peer that does not read for this long: write raises TimeoutError
 MAX_DISCARD_READS = 64
 
 
 class TcpPort:
     """A connected TCP socket as a SerialLike (see `eyehil.drivers.links`)."""
 
-    def __init__(self, host: str, port: int, timeout: float | None = 0.0) -> None:
-        """Connect to `host`:`port`; raise OSError if nobody listens."""
+    def __init__(self, host: str, port: int, timeout: float | None = 0.0,
+                 write_timeout: float = WRITE_TIMEOUT_S) -> None:
+        """Connect to `host`:`port`; raise OSError if nobody listens. `write` gives up after `write_timeout` s."""
         self._sock = socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S)
         self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._sock.setblocking(False)
         self.timeout = timeout
+        self.write_timeout = write_timeout
         self.port = f"socket://{host}:{port}"
 
     def fileno(self) -> int:
@@ -51,15 +54,21 @@ class TcpPort:
         return bytes(out)
 
     def write(self, data: bytes) -> int:
-        """Send everything (blocking at most until the socket drains)."""
+        """Send everything; raise `TimeoutError` (an OSError) if the peer takes nothing for `write_timeout` s."""
         view = memoryview(bytes(data))
+        deadline = time.monotonic() + self.write_timeout
         while view:
-            select.select([], [self._sock], [], CONNECT_TIMEOUT_S)
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise TimeoutError(f"{self.port}: the peer took no data for {self.write_timeout} s")
+            if not select.select([], [self._sock], [], remaining)[1]:
+                continue
             try:
                 sent = self._sock.send(view)
             except BlockingIOError:
                 continue
             view = view[sent:]
+            deadline = time.monotonic() + self.write_timeout  # progress: the peer reads
         return len(data)
 
     def reset_input_buffer(self) -> None:

@@ -13,6 +13,7 @@ import contextlib
 import socket
 import struct
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from itertools import count
@@ -45,6 +46,8 @@ from eyehil.protocols.usbip.urb import (
     decode_urb_header,
 )
 
+BUSY_RETRIES = 5  # an import answered DEV_BUSY is retried this often (the device frees a departed host's import)
+BUSY_WAIT_S = 0.1  # first wait between retries; grows linearly, all within the open timeout
 URB_SHUTDOWN = -108  # -ESHUTDOWN: the connection went away before the URB completed
 
 
@@ -135,14 +138,22 @@ class UsbipClient:
             if not devices:
                 raise UsbipLinkError(f"USB/IP server {host}:{port} exports no device")
             busid = devices[0].busid
-        sock, header = _op(host, port, encode_import_request(busid), timeout)
-        try:
-            if header.code != OpCode.REP_IMPORT or header.status != OpStatus.OK:
-                raise UsbipLinkError(f"import of {busid} refused: {_status_name(header.status)}")
-            return cls(sock, _read_device(sock, with_interfaces=False), on_broken)
-        except BaseException:
-            sock.close()
-            raise
+        deadline = time.monotonic() + timeout
+        for attempt in range(BUSY_RETRIES + 1):
+            sock, header = _op(host, port, encode_import_request(busid), timeout)
+            try:
+                busy = header.code == OpCode.REP_IMPORT and header.status == OpStatus.DEV_BUSY
+                if busy and attempt < BUSY_RETRIES and time.monotonic() + BUSY_WAIT_S < deadline:
+                    sock.close()
+                    time.sleep(BUSY_WAIT_S * (attempt + 1))  # the device releases a departed host's import
+                    continue
+                if header.code != OpCode.REP_IMPORT or header.status != OpStatus.OK:
+                    raise UsbipLinkError(f"import of {busid} refused: {_status_name(header.status)}")
+                return cls(sock, _read_device(sock, with_interfaces=False), on_broken)
+            except BaseException:
+                sock.close()
+                raise
+        raise UsbipLinkError(f"import of {busid} refused: device busy")
 
     def submit(self, ep: int, direction: int, length: int = 0, data: bytes = b"", setup: bytes = bytes(8),
                callback: Callable[[Urb], None] | None = None) -> Urb:

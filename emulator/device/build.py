@@ -72,9 +72,14 @@ def demo_script(scene: Scene) -> list[Segment]:
     return script
 
 
+FAST_CLOCK_SOLVE_WAIT_S = 5.0  # fast clock (virtual time): how long an observation may wait for an exact solve
+
+
 def build_subject(options: DeviceOptions, appearance: bool = True) -> Subject:
     """The simulated subject of `options`; with `appearance`, its observations also carry what frames are drawn
-    from (`appearance.AppearanceSolver`)."""
+    from (`appearance.AppearanceSolver`). On the real clock the subject never waits for a solve (fixations of new
+    targets are interpolated until solved); on the fast clock, whose time is virtual, it waits for the exact one
+    (at most `FAST_CLOCK_SOLVE_WAIT_S`)."""
     scene = load_scene(options.scene)
     if options.sides:
         scene = tracked_scene(scene, ("right", "left") if options.sides == "both" else (options.sides,))
@@ -83,7 +88,9 @@ def build_subject(options: DeviceOptions, appearance: bool = True) -> Subject:
         raise ValueError(f"eye {options.eye} out of range: the spec {options.eyes!r} gives {len(eyes)} eye(s)")
     solver = (AppearanceSolver if appearance else FeatureSolver)(eyes[options.eye], scene, options.head)
     script = demo_script(scene) if options.script == "demo" else None
-    return Subject(solver, options.behaviour, rng=np.random.default_rng(options.seed), script=script)
+    wait_s = FAST_CLOCK_SOLVE_WAIT_S if options.clock == "fast" else 0.0
+    return Subject(solver, options.behaviour, rng=np.random.default_rng(options.seed), script=script,
+                   exact_wait_s=wait_s)
 
 
 def build_device(options: DeviceOptions | None = None) -> VirtualTracker | IscanTracker:

@@ -10,13 +10,16 @@ sender's monotonic clock since an arbitrary epoch, here the clock's creation). T
   streamer may `push` it ahead to the next sample's exposure time whenever the link has room, so
   samples are produced as fast as the host consumes them (the link's buffers are the only pacing).
 
-Both are monotonic and thread-safe for one writer (the streamer) and any number of readers.
+`ManualClock` (tests, benchmarks) moves only when told. All are monotonic and thread-safe for one
+writer (the streamer) and any number of readers.
 """
 
 from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Protocol
 
 
@@ -63,7 +66,12 @@ class RealTimeClock:
 
 
 class FastClock:
-    """Device time = max(wall-clock time since creation, the latest `push`)."""
+    """Device time = max(wall-clock time since creation minus the time spent `paused`, the latest `push`).
+
+    `paused()` is a context manager for the device's own waits (the subject waiting for an exact fixation
+    solve): virtual time does not run on while the simulation itself is behind, so no sample falls due
+    (and is dropped) only because the emulator was computing.
+    """
 
     fast = True
 
@@ -72,10 +80,28 @@ class FastClock:
         self._t0_ns = time.monotonic_ns()
         self._pushed = 0
         self._lock = threading.Lock()
+        self._paused_since: int | None = None
+
+    @contextmanager
+    def paused(self) -> Iterator[None]:
+        """Stop the wall-clock floor for the duration (device time still moves with `push`)."""
+        with self._lock:
+            nested = self._paused_since is not None
+            if not nested:
+                self._paused_since = time.monotonic_ns()
+        try:
+            yield
+        finally:
+            if not nested:
+                with self._lock:
+                    self._t0_ns += time.monotonic_ns() - self._paused_since
+                    self._paused_since = None
 
     def now_us(self) -> int:
-        """Microseconds since creation, or the pushed time if that is later."""
-        wall = (time.monotonic_ns() - self._t0_ns) // 1000
+        """Microseconds since creation (less the time paused), or the pushed time if that is later."""
+        with self._lock:
+            wall_ns = self._paused_since if self._paused_since is not None else time.monotonic_ns()
+        wall = (wall_ns - self._t0_ns) // 1000
         with self._lock:
             self._pushed = max(self._pushed, wall)
             return self._pushed
@@ -87,6 +113,37 @@ class FastClock:
 
     def wall_delay_s(self, t_us: int) -> float:
         """A fast clock never makes the streamer wait."""
+        return 0.0
+
+
+class ManualClock:
+    """Device time that moves only when told (`advance`, `push`): tests and benchmarks on simulated time."""
+
+    fast = False
+
+    def __init__(self, start_us: int = 0) -> None:
+        """Start at `start_us`."""
+        self._now = int(start_us)
+        self._lock = threading.Lock()
+
+    def now_us(self) -> int:
+        """The current simulated time."""
+        with self._lock:
+            return self._now
+
+    def advance(self, dt_us: int) -> int:
+        """Move time forward by `dt_us` (>= 0); return the new time."""
+        with self._lock:
+            self._now += max(0, int(dt_us))
+            return self._now
+
+    def push(self, t_us: int) -> None:
+        """Move time forward to `t_us` (never backward)."""
+        with self._lock:
+            self._now = max(self._now, int(t_us))
+
+    def wall_delay_s(self, t_us: int) -> float:
+        """Simulated time does not pass by itself: no wall-clock wait."""
         return 0.0
 
 

@@ -23,6 +23,34 @@ from enum import IntEnum
 import numpy as np
 
 FOREVER_US = 1 << 62
+MAX_TIME_US = 1 << 60  # latest time a plan may start at (36,000 years): far below int64 overflow with FOREVER_US
+MAX_POSITION_MM = 1e5  # farthest screen position a plan may aim at (100 m from the screen centre)
+
+
+def clamp_time_us(t_us: float) -> int:
+    """`t_us` (device us) as an int in [0, MAX_TIME_US]; raise `ValueError` if it is not a finite number.
+
+    Times may come from a peer (a Pupil timestamp): anything outside the range is clamped, so that no
+    arithmetic on a plan overflows int64.
+    """
+    try:
+        value = float(t_us)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise ValueError(f"time {t_us!r} is not a number") from exc
+    if value != value or value in (float("inf"), float("-inf")):
+        raise ValueError(f"time {t_us!r} is not finite")
+    if isinstance(t_us, int | np.integer):
+        return int(min(max(int(t_us), 0), MAX_TIME_US))
+    return int(min(max(value, 0.0), float(MAX_TIME_US)))
+
+
+def position_ok(xy) -> bool:
+    """True if `xy` is two finite screen coordinates within `MAX_POSITION_MM`."""
+    try:
+        x, y = (float(v) for v in xy)
+    except (TypeError, ValueError, OverflowError):
+        return False
+    return all(v == v and abs(v) <= MAX_POSITION_MM for v in (x, y))
 MAIN_SEQUENCE_MS = (21.0, 2.2)  # intercept (ms) and slope (ms/deg) of saccade duration
 
 
@@ -141,7 +169,8 @@ class Timeline:
 
     def cut(self, t_us: int) -> tuple[float, float]:
         """Forget the plan from `t_us` on (a movement under way keeps its timing up to then); return the
-        position at `t_us`, where the next `extend` starts."""
+        position at `t_us`, where the next `extend` starts. `t_us` is clamped (`clamp_time_us`)."""
+        t_us = clamp_time_us(t_us)
         here = self.position(t_us)
         self.pieces = [p for p in self.pieces if p.start_us < t_us] or [Piece(0, t_us, Kind.HOLD, here, here)]
         self.cursor_us = t_us
@@ -166,9 +195,13 @@ class Timeline:
     def evaluate(self, times_us: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Gaze (N, 2) screen mm and `Kind` (N,) at `times_us` (N,).
 
-        A time past its piece's end (nothing planned after it) holds the piece's end point.
+        A time past its piece's end (nothing planned after it) holds the piece's end point. Times are
+        clipped to [0, FOREVER_US] (a peer's time never overflows the arithmetic).
         """
-        t = np.asarray(times_us, dtype=np.int64)
+        raw = np.asarray(times_us)
+        if raw.dtype.kind == "f":
+            raw = np.nan_to_num(raw, nan=0.0, posinf=FOREVER_US, neginf=0.0)
+        t = np.clip(raw, 0, FOREVER_US).astype(np.int64)
         p = self.pieces
         starts = np.array([q.start_us for q in p], dtype=np.int64)
         idx = np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(p) - 1)

@@ -26,12 +26,21 @@ diameter{i}_2d (px), diameter{i}_3d (mm; the anatomical pupil, NaN when not dete
 The source id is stable across restarts of the same device (`stable_source_id`: a hash of what defines the
 device), so that a recorder (LabRecorder) finds the stream again after a restart.
 
+Network exposure: liblsl reads its configuration once per process from the file named by LSLAPICFG.
+Unless the user set LSLAPICFG, `load_pylsl` points it at `LOOPBACK_CONFIG` (written to a temporary file):
+stream discovery answers on 127.0.0.1 only (``ListenAddress``), within this machine (``ResolveScope =
+machine``, multicast TTL 0), IPv4 only. liblsl 1.18 has no option to bind its per-outlet TCP data port and
+UDP time port: they listen on all interfaces (the outlet prints this at start, `exposure`); firewall them,
+or run the emulator where that does not matter.
+
 Timestamps are explicit: each sample carries its exposure's mid-exposure time, mapped from the device clock
 to LSL's `local_clock` at the push: t_lsl = local_clock() - (device now - t_exposure) / speed.
 """
 
 from __future__ import annotations
 
+import os
+import tempfile
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,8 +64,40 @@ class LslUnavailableError(ImportError):
     """pylsl or its liblsl is missing (the message says which, and how to install it)."""
 
 
+LOOPBACK_CONFIG = """[ports]
+IPv6 = disable
+[multicast]
+ResolveScope = machine
+ListenAddress = 127.0.0.1
+TTLOverride = 0
+"""
+
+
+def use_loopback_config() -> str:
+    """Point liblsl at `LOOPBACK_CONFIG` unless LSLAPICFG is set already; return the file liblsl will read."""
+    if not os.environ.get("LSLAPICFG"):
+        handle, path = tempfile.mkstemp(prefix="eyehil-lsl-", suffix=".cfg")
+        with os.fdopen(handle, "w") as f:
+            f.write(LOOPBACK_CONFIG)
+        os.environ["LSLAPICFG"] = path
+    return os.environ["LSLAPICFG"]
+
+
+def exposure() -> str:
+    """What the outlet binds, for the start-up message."""
+    cfg = os.environ.get("LSLAPICFG", "")
+    loopback = False
+    if cfg and os.path.isfile(cfg):
+        with open(cfg) as f:
+            loopback = f.read() == LOOPBACK_CONFIG
+    where = ("discovery on 127.0.0.1 only (this machine)" if loopback
+             else f"discovery as configured in {cfg or 'the liblsl defaults'}")
+    return f"LSL outlet: {where}; liblsl's data (TCP) and time (UDP) ports listen on all interfaces (no liblsl option)"
+
+
 def load_pylsl():
-    """The pylsl module, or LslUnavailableError with the reason."""
+    """The pylsl module (liblsl configured for the loopback, `use_loopback_config`), or LslUnavailableError."""
+    use_loopback_config()
     try:
         import pylsl
     except ImportError as exc:
@@ -163,6 +204,7 @@ class GazeOutlet:
                     node.append_child_value(key, getattr(ch, key))
         self.pushed = 0
         self._outlet = self._lsl.StreamOutlet(info)
+        print(exposure(), flush=True)
 
     def lsl_times(self, time_us: np.ndarray) -> np.ndarray:
         """LSL `local_clock` times (s) of device times (us), mapped now."""

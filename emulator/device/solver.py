@@ -1,9 +1,16 @@
 """Image features of the simulated subject as a function of the gaze point on the screen.
 
-The forward model (`eyehil.emulator.forward.simulate`) is exact but costs about 10 ms per call. A device
+The forward model (`eyehil.emulator.forward.simulate`) is exact but costs 10-300 ms per call. A device
 streaming at up to 2 kHz therefore solves each fixation target exactly once (`FeatureSolver.exact`,
-cached per point) and interpolates everything that moves (saccades, pursuits, fixational jitter)
-bilinearly in a grid of exact solutions over the screen (`FeatureField`, built once, lazily).
+cached per point in a bounded LRU cache of `MAX_CACHED_POINTS`) and interpolates everything that moves
+(saccades, pursuits, fixational jitter) bilinearly in a grid of exact solutions over the screen
+(`FeatureField`, built once, lazily).
+
+`SolveQueue` runs the exact solves of new fixation targets on one worker thread ("eyehil-solver"),
+coalesced: while one solve runs, only the latest requested point waits (older requests are replaced and
+counted), so a host sending a thousand targets costs at most two solves, never a queue. The device's
+thread never waits for it unless asked to (`Subject`'s `exact_wait_s`): it reads `cached` and
+`field_if_ready`, which return at once.
 
 Feature vector per eye (the "channels", image px, OpenCV convention; NaN = not computable):
 
@@ -18,7 +25,9 @@ Blocks are arrays (N points, E tracked eyes in the scene's `sides` order, C chan
 
 from __future__ import annotations
 
+import logging
 import threading
+from collections import OrderedDict
 from dataclasses import replace
 
 import numpy as np
@@ -28,6 +37,7 @@ from eyehil.emulator.forward import simulate
 from eyehil.emulator.scene import HeadPose, Scene
 
 PUPIL_CHANNELS = 5
+MAX_CACHED_POINTS = 4096  # exact solutions kept (LRU); each is E x C floats (about 200 bytes)
 
 
 def ellipse_to_moments(axes: np.ndarray, angle_deg: np.ndarray) -> np.ndarray:
@@ -59,7 +69,8 @@ class FeatureSolver:
         self.spacing, self.margin, self.n_points = grid_spacing_mm, grid_margin, n_pupil_points
         self.n_eyes, self.n_leds = len(scene.sides), len(scene.leds)
         self.n_channels = PUPIL_CHANNELS + 2 * self.n_leds
-        self._cache: dict[tuple[float, float], np.ndarray] = {}
+        self._cache: OrderedDict[tuple[float, float], np.ndarray] = OrderedDict()
+        self.max_cached = MAX_CACHED_POINTS
         self._lock = threading.Lock()
         self._field: FeatureField | None = None
         self._field_lock = threading.Lock()
@@ -83,20 +94,51 @@ class FeatureSolver:
 
     def exact(self, xy: np.ndarray) -> np.ndarray:
         """Exact features (N, E, C) of gaze points (N, 2), each distinct point solved once and cached."""
-        keys = [(round(float(x), 6), round(float(y), 6)) for x, y in np.asarray(xy, float).reshape(-1, 2)]
+        keys = [point_key(p) for p in np.asarray(xy, float).reshape(-1, 2)]
         with self._lock:
-            missing = sorted({k for k in keys if k not in self._cache})
+            known = {k: self._cache[k] for k in set(keys) if k in self._cache}
+        missing = sorted(set(keys) - set(known))
         if missing:
             solved = self.solve(np.array(missing))
-            with self._lock:
-                self._cache.update(zip(missing, solved, strict=True))
+            known.update(zip(missing, solved, strict=True))
+            self._store(dict(zip(missing, solved, strict=True)))
+        return np.stack([known[k] for k in keys]) if keys else np.empty((0, self.n_eyes, self.n_channels))
+
+    def _store(self, solved: dict[tuple[float, float], np.ndarray]) -> None:
+        """Add solutions to the cache, evicting the least recently used beyond `max_cached`."""
         with self._lock:
-            return np.stack([self._cache[k] for k in keys]) if keys else np.empty((0, self.n_eyes, self.n_channels))
+            for key, value in solved.items():
+                self._cache[key] = value
+                self._cache.move_to_end(key)
+            while len(self._cache) > self.max_cached:
+                self._cache.popitem(last=False)
+
+    def cached(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Exact features (N, E, C) where cached (NaN elsewhere) and which were (N,) bool; never solves."""
+        keys = [point_key(p) for p in np.asarray(xy, float).reshape(-1, 2)]
+        out = np.full((len(keys), self.n_eyes, self.n_channels), np.nan)
+        found = np.zeros(len(keys), bool)
+        with self._lock:
+            for i, k in enumerate(keys):
+                if k in self._cache:
+                    self._cache.move_to_end(k)
+                    out[i], found[i] = self._cache[k], True
+        return out, found
+
+    @property
+    def cache_size(self) -> int:
+        """Exact solutions cached now."""
+        with self._lock:
+            return len(self._cache)
 
     def has_exact(self, xy: tuple[float, float]) -> bool:
         """True if `exact` at this point is already cached."""
         with self._lock:
-            return (round(float(xy[0]), 6), round(float(xy[1]), 6)) in self._cache
+            return point_key(xy) in self._cache
+
+    def field_if_ready(self) -> FeatureField | None:
+        """The interpolation grid if it is built, else None (never builds it, never waits)."""
+        return self._field
 
     @property
     def field(self) -> FeatureField:
@@ -109,6 +151,92 @@ class FeatureSolver:
     def interpolate(self, xy: np.ndarray) -> np.ndarray:
         """Interpolated features (N, E, C) of gaze points (N, 2) screen mm."""
         return self.field(np.asarray(xy, float).reshape(-1, 2))
+
+
+def point_key(xy) -> tuple[float, float]:
+    """The cache key of a screen point (mm, rounded to 1 nm)."""
+    return round(float(xy[0]), 6), round(float(xy[1]), 6)
+
+
+class SolveQueue:
+    """Exact solves of fixation targets on one worker thread, coalesced; see the module docstring.
+
+    Counters: ``requested``, ``coalesced`` (requests replaced by a newer one before their solve started),
+    ``solved``, ``failed`` (a solve raised: logged, the point stays interpolated).
+    """
+
+    def __init__(self, solver: FeatureSolver) -> None:
+        """Start the worker; its first job is the interpolation grid."""
+        self.solver = solver
+        self._cond = threading.Condition()
+        self._next: tuple[float, float] | None = None  # the latest point waiting for the worker
+        self._running: tuple[float, float] | None = None  # the point being solved now
+        self._closing = False
+        self.requested = self.coalesced = self.solved = self.failed = 0
+        self._thread = threading.Thread(target=self._run, name="eyehil-solver", daemon=True)
+        self._thread.start()
+
+    def request(self, xy: tuple[float, float]) -> None:
+        """Ask for the exact solution at `xy` (screen mm); returns at once. A request still waiting is replaced."""
+        key = point_key(xy)
+        with self._cond:
+            self.requested += 1
+            if key in (self._next, self._running) or self.solver.has_exact(key):
+                return
+            if self._next is not None:
+                self.coalesced += 1
+            self._next = key
+            self._cond.notify_all()
+
+    @property
+    def idle(self) -> bool:
+        """True if no point is waiting or being solved."""
+        with self._cond:
+            return self._next is None and self._running is None
+
+    def busy_with(self, key: tuple[float, float]) -> bool:
+        """True if `key` is waiting or being solved."""
+        with self._cond:
+            return key in (self._next, self._running)
+
+    def wait(self, key: tuple[float, float] | None, timeout_s: float) -> bool:
+        """Wait up to `timeout_s` until the grid is built and `key` (if any) is no longer pending; True if so."""
+        def done() -> bool:
+            return self._closing or (self.solver.field_if_ready() is not None
+                                     and (key is None or key not in (self._next, self._running)))
+        with self._cond:
+            return self._cond.wait_for(done, timeout_s)
+
+    def _run(self) -> None:
+        try:
+            self.solver.field  # noqa: B018 - the grid first: every movement and every unsolved fixation needs it
+        except Exception:  # a bug in the forward model: logged; the device keeps streaming what it can
+            logging.getLogger(__name__).exception("interpolation grid failed")
+        with self._cond:
+            self._cond.notify_all()
+        while True:
+            with self._cond:
+                self._cond.wait_for(lambda: self._closing or self._next is not None)
+                if self._closing:
+                    return
+                self._running, self._next = self._next, None
+            try:
+                self.solver.exact(np.array([self._running]))
+                self.solved += 1
+            except Exception:  # as above
+                self.failed += 1
+                logging.getLogger(__name__).exception("fixation solve failed at %s", self._running)
+            with self._cond:
+                self._running = None
+                self._cond.notify_all()
+
+    def close(self) -> None:
+        """Stop the worker (a solve under way finishes first); idempotent."""
+        with self._cond:
+            self._closing = True
+            self._cond.notify_all()
+        if self._thread is not threading.current_thread():
+            self._thread.join()
 
 
 class FeatureField:

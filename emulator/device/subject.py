@@ -7,21 +7,40 @@ gaze script (`eyehil.emulator.device.gaze`, repeated by default) or follows the 
 until told otherwise. `observe(times)` returns the image features at exposure times:
 
 - fixating: the exact forward-model solution for the fixated point (solved once per point, ahead of
-  time on a worker thread when a stimulus arrives), plus optional fixational jitter (white noise of
-  `jitter_deg` on the gaze direction, applied through the interpolation grid's local slope);
+  time on a worker thread when a stimulus arrives: `solver.SolveQueue`, coalesced), plus optional
+  fixational jitter (white noise of `jitter_deg` on the gaze direction, applied through the
+  interpolation grid's local slope); while the exact solve of a new point is still running, the point is
+  interpolated in the grid (counted in `interpolated_holds`);
 - moving (saccade, pursuit): interpolated in the solver's grid;
 - blinking (scripted, or spontaneous at `blink_rate_hz`): no features.
+
+`observe` never waits for a solve unless `exact_wait_s` > 0 (a device on the fast clock, whose time is
+virtual, waits that long at most for the exact solution or the grid); with the default 0 the grid is
+built when the subject is (a fixation of a new target is interpolated in it until its exact solve is
+done), and samples it could not give (only if it is missing) carry no features, counted in
+`unsolved_samples`. A peer's target is range-checked (`look_at`).
 """
 
 from __future__ import annotations
 
-from concurrent.futures import Future, ThreadPoolExecutor
+from collections.abc import Callable
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass
 
 import numpy as np
 
-from eyehil.emulator.device.gaze import Fixation, Kind, Saccade, Segment, Timeline, plan
-from eyehil.emulator.device.solver import FeatureSolver
+from eyehil.emulator.device.gaze import (
+    FOREVER_US,
+    Fixation,
+    Kind,
+    Saccade,
+    Segment,
+    Timeline,
+    clamp_time_us,
+    plan,
+    position_ok,
+)
+from eyehil.emulator.device.solver import FeatureSolver, SolveQueue, point_key
 
 
 @dataclass(frozen=True)
@@ -74,21 +93,31 @@ class Subject:
 
     def __init__(self, solver: FeatureSolver, behaviour: Behaviour | None = None, *,
                  rng: np.random.Generator | None = None, script: list[Segment] | None = None,
-                 repeat: bool = True, start: tuple[float, float] = (0.0, 0.0)) -> None:
-        """Follow `script` (repeated if `repeat`) or, without one, fixate `start` until a stimulus comes."""
+                 repeat: bool = True, start: tuple[float, float] = (0.0, 0.0), exact_wait_s: float = 0.0) -> None:
+        """Follow `script` (repeated if `repeat`) or, without one, fixate `start` until a stimulus comes;
+        `exact_wait_s`: how long `observe` may wait for a solve (0: never)."""
         self.solver = solver
         self.behaviour = behaviour or Behaviour()
         self.rng = rng or np.random.default_rng(0)
         self.timeline = Timeline(start)
         self.blinks = BlinkProcess(self.behaviour.blink_rate_hz, self.behaviour.blink_s, self.rng)
         self.script, self.repeat = script, repeat
-        self._executor: ThreadPoolExecutor | None = None
-        self._pending: dict[tuple[float, float], Future] = {}
+        self.exact_wait_s = exact_wait_s
+        self.pause_clock: Callable[[], AbstractContextManager] = nullcontext  # the device clock's `paused`, if any
+        self._solves: SolveQueue | None = None
+        self.targets_refused = 0  # look_at targets ignored (not finite, too far)
+        self.interpolated_holds = 0  # fixation samples interpolated because their exact solve was still running
+        self.unsolved_samples = 0  # samples without features because the grid was not built yet
         if script:
             self.timeline.cut(0)
             targets = {s.target for s in script if isinstance(s, Fixation)} | {start}
+            solver.max_cached = max(solver.max_cached, 2 * len(targets))
             solver.exact(np.array(sorted(targets)))  # every fixation of the script, solved up front
             solver.field  # noqa: B018 - and the grid its movements are interpolated in
+        else:
+            solver.exact(np.array([start]))  # where the subject looks until the first stimulus
+            if exact_wait_s == 0:
+                solver.field  # noqa: B018 - never waiting later: the grid must be there before the first stimulus
 
     @property
     def screen_centre(self) -> np.ndarray:
@@ -98,8 +127,20 @@ class Subject:
     def look_at(self, xy: tuple[float, float], t_us: int) -> int:
         """A target appears at `xy` (screen mm) at `t_us`: plan the saccade; return when the plan changes (us).
 
-        Stops any script. Features before the returned time are unaffected.
+        Stops any script. Features before the returned time are unaffected. Never raises on what a peer
+        sent: `t_us` is clamped to [0, MAX_TIME_US] (a non-number means now is unknown: 0), and a target that
+        is not finite or farther than MAX_POSITION_MM is ignored (counted in `targets_refused`; the plan
+        is unchanged and the returned time is FOREVER_US, i.e. nothing to invalidate).
         """
+        if not position_ok(xy):
+            self.targets_refused += 1
+            return FOREVER_US
+        try:
+            t_us = clamp_time_us(t_us)
+        except ValueError:
+            self.targets_refused += 1
+            return FOREVER_US
+        xy = (float(xy[0]), float(xy[1]))
         self.script = None
         latency = self.behaviour.latency_s + self.behaviour.latency_sd_s * self.rng.standard_normal()
         effect_us = t_us + max(0, round(latency * 1e6))
@@ -111,14 +152,23 @@ class Subject:
         return effect_us
 
     def _prefetch(self, xy: tuple[float, float]) -> None:
-        """Solve the fixation at `xy` on the worker thread unless it is known or under way."""
-        key = (round(xy[0], 6), round(xy[1], 6))
-        if self.solver.has_exact(key) or key in self._pending:
+        """Ask the worker for the fixation at `xy` unless it is known (coalesced with requests still waiting)."""
+        if self.solver.has_exact(xy) and self.solver.field_if_ready() is not None:
             return
-        if self._executor is None:
-            self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="eyehil-solver")
-            self._executor.submit(lambda: self.solver.field)  # the grid for the saccades, built once
-        self._pending[key] = self._executor.submit(self.solver.exact, np.array([key]))
+        if self._solves is None:
+            self._solves = SolveQueue(self.solver)
+        self._solves.request(xy)
+
+    def _interpolate(self, xy: np.ndarray) -> np.ndarray | None:
+        """Interpolated features (N, E, C), or None if the grid is not built yet (waits `exact_wait_s` at most)."""
+        if self.solver.field_if_ready() is None:
+            if self._solves is None:  # nobody is building it: a subject that never got a stimulus
+                self._solves = SolveQueue(self.solver)
+            if self.exact_wait_s > 0:
+                with self.pause_clock():
+                    self._solves.wait(None, self.exact_wait_s)
+        field = self.solver.field_if_ready()
+        return None if field is None else field(np.asarray(xy, float).reshape(-1, 2))
 
     def _extend_script(self, t_us: int) -> None:
         """Append script cycles until the plan covers `t_us`."""
@@ -143,24 +193,42 @@ class Subject:
         if hold.any():
             values[hold] = self._fixating(xy[hold])
         if move.any():
-            values[move] = self.solver.interpolate(xy[move])
+            moving = self._interpolate(xy[move])
+            if moving is None:
+                self.unsolved_samples += int(move.sum())
+            else:
+                values[move] = moving
         return Observation(values, blink)
 
     def _fixating(self, xy: np.ndarray) -> np.ndarray:
-        """Exact features at fixated points (N, 2), plus jitter."""
-        for key in {(round(x, 6), round(y, 6)) for x, y in xy.tolist()} & set(self._pending):
-            self._pending.pop(key).result()
-        values = self.solver.exact(xy)
+        """Features at fixated points (N, 2): exact where solved, interpolated while the solve runs; plus jitter."""
+        values, found = self.solver.cached(xy)
+        if not found.all() and self.exact_wait_s > 0 and self._solves is not None:
+            for key in {point_key(p) for p in xy[~found]}:
+                if self._solves.busy_with(key):
+                    with self.pause_clock():
+                        self._solves.wait(key, self.exact_wait_s)
+            values, found = self.solver.cached(xy)
+        if not found.all():
+            if self._solves is None or self._solves.idle:  # never displace a newer target waiting for the worker
+                self._prefetch(point_key(xy[~found][0]))  # a point nobody asked for (evicted from the cache)
+            approx = self._interpolate(xy[~found])
+            if approx is None:
+                self.unsolved_samples += int((~found).sum())
+            else:
+                values[~found] = approx
+                self.interpolated_holds += int((~found).sum())
         if self.behaviour.jitter_deg > 0:
-            distance = float(np.linalg.norm(self.screen_centre))
-            sd_mm = distance * np.tan(np.radians(self.behaviour.jitter_deg))
-            moved = xy + self.rng.normal(0.0, sd_mm, xy.shape)
-            values = values + self.solver.interpolate(moved) - self.solver.interpolate(xy)
+            here, moved_xy = self._interpolate(xy), None
+            if here is not None:
+                distance = float(np.linalg.norm(self.screen_centre))
+                sd_mm = distance * np.tan(np.radians(self.behaviour.jitter_deg))
+                moved_xy = xy + self.rng.normal(0.0, sd_mm, xy.shape)
+                values = values + self._interpolate(moved_xy) - here
         return values
 
     def close(self) -> None:
-        """Stop the worker thread (pending solves are cancelled)."""
-        if self._executor is not None:
-            self._executor.shutdown(wait=True, cancel_futures=True)
-            self._executor = None
-        self._pending.clear()
+        """Stop the worker thread (a solve under way finishes first)."""
+        if self._solves is not None:
+            self._solves.close()
+            self._solves = None

@@ -14,7 +14,11 @@ sleeps or starts a thread; the core is not thread-safe (a link runner serialises
   behind the FEATURES (`frame_stream`; dropped images counted in `frames_dropped`). The FEATURES limit
   grows by the frame budget, which the link's backlog may hold in chunks. With frames, `next_due_us` asks
   for one exposure at a time (a fast clock never outruns the images) and for an early look while chunks wait.
-- STIMULUS moves the simulated subject's target (`eyehil.emulator.device.stimulus`).
+- A new connection (`connection_reset`) starts a fresh session: IDLE, default configuration, nothing queued.
+- STIMULUS moves the simulated subject's target (`eyehil.emulator.device.stimulus`); it never waits for the
+  subject's fixation solve (`eyehil.emulator.device.subject`), so its ACK is immediate.
+- Replies are bounded too: a reply that would push the output past `max_output_bytes` + `REPLY_HEADROOM`
+  (a host that sends commands and never reads) is dropped and counted (`replies_dropped`).
 """
 
 from __future__ import annotations
@@ -50,6 +54,7 @@ MODEL = "eyehil virtual tracker"
 FIRMWARE_VERSION = "0.1.0"
 U32 = 1 << 32
 PENDING_WAKE_US = 500  # while chunks wait, the runner looks again this soon (device us)
+REPLY_HEADROOM = 64 * 1024  # bytes of replies the output may hold beyond the sample limit
 
 
 class VirtualTracker:
@@ -65,6 +70,8 @@ class VirtualTracker:
         if not MIN_RATE_HZ <= default_rate_hz <= MAX_RATE_HZ:
             raise ValueError(f"default rate {default_rate_hz} Hz outside {MIN_RATE_HZ}..{MAX_RATE_HZ}")
         self.subject, self.clock = subject, clock or RealTimeClock()
+        if hasattr(self.clock, "paused"):
+            subject.pause_clock = self.clock.paused  # a fast clock's virtual time waits for the subject's solves
         self.sensor = tuple(int(v) for v in scene.camera.resolution_px)
         self.tracked = tuple(Eye.RIGHT if s == "right" else Eye.LEFT for s in scene.sides)
         self.camera = Camera(subject, self.sensor, self.tracked)
@@ -78,6 +85,7 @@ class VirtualTracker:
         self._out = bytearray()
         self._seq = 0
         self._tx = {"tx_frames": 0, "samples_sent": 0, "samples_dropped": 0, "commands_refused": 0}
+        self.replies_dropped = 0
         self._sample_size = 0
         self._handlers = {Ping: self._ping, GetInfo: self._info, GetStatus: self._status, Configure: self._configure,
                           Start: self._start, Stop: self._stop, Stimulus: self._stimulus}
@@ -113,12 +121,25 @@ class VirtualTracker:
                 self._respond(event.reply)
 
     def connection_reset(self) -> None:
-        """A new host connected (a new byte stream): forget a partial frame and the host's sequence baseline."""
+        """A new host connected (a new byte stream): the session is fresh. Forget a partial frame, the host's
+        sequence baseline and every response or sample queued for the previous host; stop a stream it left
+        running (images abandoned are counted in `frames_dropped`) and go back to the default configuration."""
         self._rx.framer.reset()
         self._rx.sequence = SequenceTracker()
+        if self.state is DeviceState.STREAMING:
+            self.camera.stop()
+            if self._with_frames:
+                self.frames.stop()
+            self.state = DeviceState.IDLE
+        self._config = None
+        self._out.clear()
 
     def _respond(self, message: Message) -> None:
-        """Queue one response with the next sequence number, stamped now."""
+        """Queue one response with the next sequence number, stamped now (dropped, counted, beyond the limit)."""
+        budget = self.frames.options.budget_bytes if self.frames is not None else 0
+        if len(self._out) >= self.max_output_bytes + budget + REPLY_HEADROOM:
+            self.replies_dropped += 1
+            return
         self._out += encode(message, self._seq, self.clock.now_us())
         self._seq = (self._seq + 1) % U32
         self._tx["tx_frames"] += 1

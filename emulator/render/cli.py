@@ -57,8 +57,9 @@ def run(args: argparse.Namespace) -> int:
     records = []
     frames = render_features(features, eyes, scene, np.random.default_rng(args.seed), index=picks, roi=roi,
                              blink=args.blink, settings=settings)
+    stem = safe_stem(scene.name)
     for key, frame in frames:
-        path = out / f"{scene.name}_{'_'.join(str(k) for k in key)}.png"
+        path = out / f"{stem}_{'_'.join(str(k) for k in key)}.png"
         if not cv2.imwrite(str(path), frame.image):
             raise ValueError(f"could not write {path}")
         records.append(_record(path.name, key, frame))
@@ -77,6 +78,13 @@ def _size(text: str) -> tuple[int, int]:
     if w <= 0 or h <= 0:
         raise ValueError("--roi sizes must be positive")
     return w, h
+
+
+def safe_stem(name: str) -> str:
+    """`name` (a scene's, from a file anyone may write) as a file-name stem: letters, digits, ``-``, ``_``, ``.``
+    only, no leading dot; so ``../ESCAPED`` or ``/etc/x`` cannot place a file outside the output folder."""
+    stem = "".join(c if c.isascii() and (c.isalnum() or c in "-_.") else "_" for c in name).lstrip(".")
+    return stem[:100] or "scene"
 
 
 def _record(name: str, key: tuple[int, ...], frame) -> dict:

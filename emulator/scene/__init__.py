@@ -5,7 +5,8 @@
 - `presets/*.toml`: guestrin2006, guestrin2006-table3, blignaut2014.
 """
 
-from eyehil.emulator.scene.loader import load_scene, preset_names, scene_from_dict
+from eyehil.emulator.scene.loader import load_scene, preset_names, scene_from_dict, scene_from_toml_bytes
 from eyehil.emulator.scene.model import SIDES, HeadPose, Scene, SceneError, Screen
 
-__all__ = ["SIDES", "HeadPose", "Scene", "SceneError", "Screen", "load_scene", "preset_names", "scene_from_dict"]
+__all__ = ["SIDES", "HeadPose", "Scene", "SceneError", "Screen", "load_scene", "preset_names", "scene_from_dict",
+           "scene_from_toml_bytes"]

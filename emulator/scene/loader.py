@@ -23,6 +23,11 @@ grid = [3, 3]
 name = "central"
 offset_mm = [0.0, 0.0, 0.0]  # yaw_deg, pitch_deg, roll_deg optional
 ```
+
+Whatever the bytes, `scene_from_toml_bytes` (what `load_scene` reads files with) and
+`scene_from_dict` raise only `SceneError`: not UTF-8, not TOML, a wrong type anywhere, or a number out of
+range (a camera of more than `MAX_RESOLUTION_PX` pixels a side, more than `MAX_LEDS` LEDs or
+`MAX_HEAD_POSITIONS` head positions) all name the key and the problem.
 """
 
 from __future__ import annotations
@@ -39,11 +44,22 @@ from eyehil.emulator.scene.model import SIDES, HeadPose, Scene, SceneError, Scre
 
 _PRESETS = resources.files(__package__) / "presets"
 
+MAX_RESOLUTION_PX = 16384
+MAX_LEDS = 16
+MAX_HEAD_POSITIONS = 1024
+MAX_GRID = 100
 KNOWN_TOP = {"name", "description", "source", "sides", "ipd_mm", "wavelength_nm", "media", "camera", "leds",
              "screen", "head_positions", "extra"}
 
 
+def _table(data: Any, where: str) -> dict:
+    if not isinstance(data, dict):
+        raise SceneError(f"{where}: expected a table")
+    return data
+
+
 def _vector(data: dict, key: str, where: str, n: int, *, positive: bool = False) -> np.ndarray:
+    data = _table(data, where)
     if key not in data:
         raise SceneError(f"{where}.{key}: missing (a list of {n} numbers)")
     value = data[key]
@@ -72,13 +88,20 @@ def _camera(data: Any) -> PinholeCamera:
         roll_deg=_number(data, "roll_deg", "camera", 0.0, -180, 180),
         focal_px=tuple(_vector(data, "focal_px", "camera", 2, positive=True)),
         principal_px=tuple(_vector(data, "principal_px", "camera", 2)),
-        resolution_px=tuple(int(v) for v in _vector(data, "resolution_px", "camera", 2, positive=True)),
+        resolution_px=_resolution(data),
         distortion=tuple(_vector(data, "distortion", "camera", 2)) if "distortion" in data else (0.0, 0.0),
     )
 
 
+def _resolution(data: dict) -> tuple[int, int]:
+    px = _vector(data, "resolution_px", "camera", 2, positive=True)
+    if np.any(px > MAX_RESOLUTION_PX) or np.any(px != np.round(px)):
+        raise SceneError(f"camera.resolution_px: expected whole numbers in 1..{MAX_RESOLUTION_PX}")
+    return int(px[0]), int(px[1])
+
+
 def _leds(data: Any) -> np.ndarray:
-    if not isinstance(data, list) or not data:
+    if not isinstance(data, list) or not data or len(data) > MAX_LEDS:
         raise SceneError("leds: expected one or more [[leds]] tables with position_mm")
     leds = np.stack([_vector(led, "position_mm", f"leds[{i}]", 3) for i, led in enumerate(data)])
     if np.any(leds[:, 2] <= 0):
@@ -90,7 +113,7 @@ def _screen(data: Any) -> Screen:
     if not isinstance(data, dict):
         raise SceneError("screen: missing table [screen]")
     grid = _vector(data, "grid", "screen", 2, positive=True)
-    if np.any(grid != np.round(grid)):
+    if np.any(grid != np.round(grid)) or np.any(grid > MAX_GRID):
         raise SceneError(f"screen.grid: expected whole numbers, got {data['grid']!r}")
     centre = _vector(data, "centre_mm", "screen", 3)
     if centre[2] <= 0:
@@ -102,20 +125,35 @@ def _screen(data: Any) -> Screen:
 def _head_positions(data: Any) -> tuple[HeadPose, ...]:
     if data is None:
         return (HeadPose(),)
-    if not isinstance(data, list) or not data:
+    if not isinstance(data, list) or not data or len(data) > MAX_HEAD_POSITIONS:
         raise SceneError("head_positions: expected [[head_positions]] tables")
     poses = []
     for i, item in enumerate(data):
         where = f"head_positions[{i}]"
+        item = _table(item, where)
         offset = _vector(item, "offset_mm", where, 3) if "offset_mm" in item else np.zeros(3)
         angles = [_number(item, k, where, 0.0, -45, 45) for k in ("yaw_deg", "pitch_deg", "roll_deg")]
         poses.append(HeadPose(str(item.get("name", f"position {i}")), *offset.tolist(), *angles))
     return tuple(poses)
 
 
+def scene_from_toml_bytes(raw: bytes, origin: str = "scene") -> Scene:
+    """Decode (UTF-8), parse (TOML) and validate a scene; `SceneError` for anything wrong."""
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise SceneError(f"{origin}: not UTF-8 ({exc.reason} at byte {exc.start})") from None
+    try:
+        data = tomllib.loads(text)
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        raise SceneError(f"{origin}: not valid TOML: {exc}") from None
+    return scene_from_dict(data, origin)
+
+
 def scene_from_dict(data: dict[str, Any], origin: str = "scene") -> Scene:
     """Build and validate a Scene from parsed TOML."""
     try:
+        data = _table(data, "scene")
         unknown = set(data) - KNOWN_TOP
         if unknown:
             raise SceneError(f"{', '.join(sorted(unknown))}: unknown key(s); known: {', '.join(sorted(KNOWN_TOP))}")
@@ -137,12 +175,12 @@ def scene_from_dict(data: dict[str, Any], origin: str = "scene") -> Scene:
             media=media,
             description=str(data.get("description", "")),
             source=str(data.get("source", "")),
-            extra=dict(data.get("extra", {})),
+            extra=dict(_table(data.get("extra", {}), "extra")),
         )
     except SceneError as exc:
         raise SceneError(f"{origin}: {exc}") from None
-    except ValueError as exc:
-        raise SceneError(f"{origin}: {exc}") from None
+    except (ValueError, TypeError, ArithmeticError, LookupError) as exc:  # a check above missed it: still SceneError
+        raise SceneError(f"{origin}: {type(exc).__name__}: {exc}") from None
 
 
 def load_scene(name_or_path: str | Path) -> Scene:
@@ -151,17 +189,13 @@ def load_scene(name_or_path: str | Path) -> Scene:
     if path.suffix == ".toml" or path.exists():
         if not path.is_file():
             raise SceneError(f"scene file {path} does not exist")
-        text, origin = path.read_text(encoding="utf-8"), str(path)
+        raw, origin = path.read_bytes(), str(path)
     else:
         res = _PRESETS / f"{name_or_path}.toml"
         if not res.is_file():
             raise SceneError(f"unknown scene {name_or_path!r}; presets: {', '.join(preset_names())}")
-        text, origin = res.read_text(encoding="utf-8"), f"preset {name_or_path}"
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"{origin}: not valid TOML: {exc}") from exc
-    return scene_from_dict(data, origin)
+        raw, origin = res.read_bytes(), f"preset {name_or_path}"
+    return scene_from_toml_bytes(raw, origin)
 
 
 def preset_names() -> list[str]:

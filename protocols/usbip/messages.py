@@ -188,7 +188,11 @@ def decode_devlist_reply(data: bytes) -> list[UsbDevice]:
     header = OpHeader.decode(data[: OP_HEADER.size])
     if header.code != OpCode.REP_DEVLIST or header.status != OpStatus.OK:
         raise UsbipError(f"not a successful devlist reply: {header}")
+    if len(data) < OP_HEADER.size + 4:
+        raise UsbipError(f"devlist reply of {len(data)} bytes has no device count")
     (count,), pos, devices = struct.unpack_from(">I", data, OP_HEADER.size), OP_HEADER.size + 4, []
+    if count * USB_DEVICE.size > len(data) - pos:
+        raise UsbipError(f"devlist reply claims {count} devices in {len(data) - pos} bytes")
     for _ in range(count):
         device, n_interfaces = UsbDevice.decode(data[pos: pos + USB_DEVICE.size])
         pos += USB_DEVICE.size

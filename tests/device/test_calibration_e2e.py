@@ -59,7 +59,7 @@ def test_calibration_through_the_device_matches_offline(tmp_path, backend: str, 
     plan = Plan.default(geometry.screen, settle_s=0.4, collect_s=0.05)
     url, close = start_emulator(backend, scene=scene_name, eyes=EYES, eye=EYE, rate=500)
     try:
-        with open_tracker(url) as tracker:
+        with open_tracker(url, timeout=60.0) as tracker:  # generous: solves on a loaded machine
             result = calibrate(tracker, geometry, method, plan)
     finally:
         close()

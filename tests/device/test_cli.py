@@ -54,3 +54,11 @@ def test_record_with_targets(geometry, tmp_path, capsys) -> None:
 def test_errors_are_reported_not_raised(capsys) -> None:
     assert main(["info", "nonsense://x"]) == 1
     assert "SchemeUnavailableError" in capsys.readouterr().err
+
+
+def test_stream_through_injected_faults(capsys) -> None:
+    url = f"loop://?{query(rate=500)}"
+    spec = "drop=0.05,duplicate=0.05,seed=3,after=10"
+    assert main(["stream", url, "--duration", "0.5", "--every", "100", "--fault", spec]) == 0
+    out = capsys.readouterr().out
+    assert "lost_frames" in out and "duplicates_dropped" in out

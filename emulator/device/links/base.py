@@ -42,6 +42,12 @@ thread calls it)::
 
 The runner's thread owns the core: it wakes at each sample's due time (real clock), whenever the link
 has room (fast clock) and whenever the link received bytes, which it feeds and answers at once.
+
+Limits (a host that floods commands and never reads cannot grow the device): the runner's inbox holds at
+most `MAX_INBOX_BYTES` / `MAX_INBOX_CHUNKS`; bytes beyond are dropped and counted (`counters`
+``input_dropped_bytes``, ``input_dropped_chunks``). While the link holds `MAX_REPLY_BACKLOG` bytes or
+more that the host did not take, the runner stops feeding the core (its replies would only pile up), so
+the inbox fills and the host's further input is dropped: the device keeps its memory and its stream.
 """
 
 from __future__ import annotations
@@ -58,6 +64,10 @@ FAST_LOW_WATER = 8192  # fast clock: produce more samples only while the link ho
 FAST_BLOCK = 32  # fast clock: samples produced per step
 FAST_STEPS = 4  # fast clock: steps between two looks at the host's commands
 IDLE_WAIT_S = 0.25
+MAX_INBOX_BYTES = 256 * 1024  # host bytes waiting for the runner
+MAX_INBOX_CHUNKS = 4096  # host reads waiting for the runner
+MAX_REPLY_BACKLOG = 1024 * 1024  # link backlog (bytes) above which the runner stops feeding commands (> the
+# device's own sample and frame limits, so a streaming device always takes commands)
 
 
 def take(buffer: bytearray, max_bytes: int | None = None) -> bytes:
@@ -115,6 +125,9 @@ class LinkRunner:
         """Join `core` (a DeviceCore) and `link`; call `start` (or use `with`)."""
         self.core, self.link = core, link
         self._inbox: deque[bytes | None] = deque()  # None: a new host connected
+        self._inbox_bytes = 0
+        self._inbox_lock = threading.Lock()
+        self.counters = {"input_dropped_bytes": 0, "input_dropped_chunks": 0, "resets": 0}
         self._wake = threading.Event()
         self._stopping = False
         self.failure: Exception | None = None  # what stopped the thread, if it died
@@ -138,18 +151,36 @@ class LinkRunner:
         self.close()
 
     def _receive(self, data: bytes) -> None:
-        """Called by the link's thread: queue the bytes for the runner."""
-        self._inbox.append(bytes(data))
+        """Called by the link's thread: queue the bytes for the runner (dropped, counted, beyond the limits)."""
+        with self._inbox_lock:
+            if self._inbox_bytes + len(data) > MAX_INBOX_BYTES or len(self._inbox) >= MAX_INBOX_CHUNKS:
+                self.counters["input_dropped_bytes"] += len(data)
+                self.counters["input_dropped_chunks"] += 1
+                return
+            self._inbox.append(bytes(data))
+            self._inbox_bytes += len(data)
         self._wake.set()
 
     def _reset(self) -> None:
-        self._inbox.append(None)
+        """A new host: whatever the previous one sent and the device did not read yet is forgotten."""
+        with self._inbox_lock:
+            self._inbox.clear()
+            self._inbox_bytes = 0
+            self._inbox.append(None)
+            self.counters["resets"] += 1
         self._wake.set()
 
+    @property
+    def inbox_bytes(self) -> int:
+        """Host bytes waiting for the runner."""
+        return self._inbox_bytes
+
     def _drain_inbox(self) -> None:
-        """Feed what the host sent and send the responses at once."""
-        while self._inbox:
-            data = self._inbox.popleft()
+        """Feed what the host sent and send the responses at once (not while the host leaves replies unread)."""
+        while self._inbox and self.link.backlog() < MAX_REPLY_BACKLOG:
+            with self._inbox_lock:
+                data = self._inbox.popleft()
+                self._inbox_bytes -= len(data) if data is not None else 0
             if data is None:
                 self.core.connection_reset()
             else:

@@ -3,7 +3,9 @@
 The thread selects on the link's readable descriptors and a wake-up pipe, hands received bytes to the
 runner, and writes queued output when the descriptor becomes writable. `send` writes directly when
 nothing is queued (the common case: one system call on the runner's thread, no thread hop) and queues
-the rest. Subclasses fill four hooks: `_read_fds`, `_write_fd`, `_readable(fd)` and `_release`.
+the rest, at most `MAX_LINK_BACKLOG` bytes: beyond, output is dropped and counted (``bytes_dropped``; the
+device's own limits normally keep far below it). Subclasses fill four hooks: `_read_fds`, `_write_fd`,
+`_readable(fd)` and `_release`.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from collections.abc import Callable
 from eyehil.emulator.device.links.base import register_open, unregister
 
 CHUNK = 65536
+MAX_LINK_BACKLOG = 4 * 1024 * 1024  # bytes queued for a host that does not read
 
 
 class FdLink:
@@ -36,6 +39,7 @@ class FdLink:
         self._reset: Callable[[], None] = lambda: None
         self._thread: threading.Thread | None = None
         self._closing = False
+        self.bytes_dropped = 0
         register_open(self, self.name)
 
     # --- hooks -------------------------------------------------------------------------------
@@ -74,6 +78,9 @@ class FdLink:
                 return
             if not self._out:
                 data = data[self._write(fd, data):]
+            if data and len(self._out) + len(data) > MAX_LINK_BACKLOG:
+                self.bytes_dropped += len(data)
+                return
             if data:
                 self._out += data
                 self._poke()

@@ -13,7 +13,11 @@ directly, without the kernel. See docs/usbip.md.
 Threads (named "eyehil-usbip-..."): one accepts; one per connection answers its op request (a devlist,
 then the connection closes, as usbipd does) and, after a successful import, reads its URBs; a writer per
 session (see `usbip_session`). `on_attach()` runs when a host imports the device, before any of its data.
-One host at a time: a second import gets ST_DEV_BUSY. Bytes sent while no host is attached are dropped
+One host at a time: a second import gets ST_DEV_BUSY. Limits: at most `MAX_CONNECTIONS` connections at
+once (more are closed, `connections_refused`); a connection has `OP_TIMEOUT` s in total for its op request;
+an imported host that has no IN URB waiting and sends nothing for `usbip_session.IMPORT_LEASE_S` loses the
+device (the lease); per session at most `MAX_PENDING_URBS` IN URBs per endpoint and `MAX_REPLY_BYTES` of
+unread replies (beyond: the session ends). Bytes sent while no host is attached are dropped
 (counted in `bytes_dropped`), as are bytes beyond `max_buffer` still queued. A bad op header (version
 other than 0x0111, unknown code) closes the connection.
 """
@@ -25,6 +29,7 @@ import logging
 import selectors
 import socket
 import threading
+import time
 from collections.abc import Callable
 from itertools import count
 
@@ -46,7 +51,8 @@ from eyehil.protocols.usbip.messages import (
 )
 
 log = logging.getLogger(__name__)
-OP_TIMEOUT = 10.0  # seconds a new connection has to send its op request
+OP_TIMEOUT = 10.0  # seconds a new connection has to send its whole op request (a total, not per recv)
+MAX_CONNECTIONS = 8  # connections served at once (each has a thread): more are closed at once, counted
 JOIN_TIMEOUT = 10.0
 
 
@@ -70,6 +76,8 @@ class UsbipCdcServer:
         self._ids = count(1)
         self._dropped = 0
         self._bound_port = 0
+        self.connections_refused = 0
+        self.imports_busy = 0  # imports answered DEV_BUSY
 
     def __enter__(self) -> UsbipCdcServer:
         return self.start()
@@ -180,6 +188,10 @@ class UsbipCdcServer:
                 conn.close()
                 return
             self._connections = {t: c for t, c in self._connections.items() if t.is_alive()}
+            if len(self._connections) >= MAX_CONNECTIONS:
+                self.connections_refused += 1
+                conn.close()
+                return
             self._connections[thread] = conn
         thread.start()
 
@@ -194,7 +206,8 @@ class UsbipCdcServer:
             conn.close()  # the thread stays in _connections (pruned when dead) so that close() joins it
 
     def _serve_op(self, conn: socket.socket) -> None:
-        raw = recv_exact(conn, OP_HEADER.size)
+        deadline = time.monotonic() + OP_TIMEOUT
+        raw = recv_exact(conn, OP_HEADER.size, deadline)
         if raw is None:
             return
         op = OpHeader.decode(raw)
@@ -203,12 +216,12 @@ class UsbipCdcServer:
         if op.code == OpCode.REQ_DEVLIST:
             conn.sendall(encode_devlist_reply([self.device]))
         elif op.code == OpCode.REQ_IMPORT:
-            self._serve_import(conn)
+            self._serve_import(conn, deadline)
         else:
             raise UsbipError(f"unknown op code 0x{op.code:04X}")
 
-    def _serve_import(self, conn: socket.socket) -> None:
-        raw = recv_exact(conn, BUSID_SIZE)
+    def _serve_import(self, conn: socket.socket, deadline: float) -> None:
+        raw = recv_exact(conn, BUSID_SIZE, deadline)
         if raw is None:
             return
         if decode_busid(raw) != self.device.busid:
@@ -216,6 +229,8 @@ class UsbipCdcServer:
             return
         session = self._claim(conn)
         if session is None:
+            with self._cond:
+                self.imports_busy += 1
             conn.sendall(encode_import_reply(None, OpStatus.DEV_BUSY))
             return
         try:

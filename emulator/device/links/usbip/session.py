@@ -18,6 +18,7 @@ import contextlib
 import logging
 import socket
 import threading
+import time
 from collections import deque
 from collections.abc import Callable
 
@@ -39,6 +40,9 @@ from eyehil.protocols.usbip.urb import (
 
 log = logging.getLogger(__name__)
 MAX_TRANSFER = 16 * 1024 * 1024
+MAX_PENDING_URBS = 64  # IN URBs waiting for data, per endpoint: more ends the session
+MAX_REPLY_BYTES = 1024 * 1024  # replies the host did not fetch: more ends the session
+IMPORT_LEASE_S = 60.0  # a host with no URB waiting that sends nothing for this long loses the device
 _BULK_IN, _NOTIFY_IN, _BULK_OUT = EP_DATA_IN & 0x0F, EP_NOTIFY & 0x0F, EP_DATA_OUT & 0x0F
 
 
@@ -51,11 +55,18 @@ def call_consumer(callback: Callable[..., None] | None, *args: object) -> None:
         log.exception("%s callback failed", getattr(callback, "__name__", "consumer"))
 
 
-def recv_exact(sock: socket.socket, size: int) -> bytes | None:
-    """Exactly `size` bytes from the socket, or None if the peer closed it first."""
+def recv_exact(sock: socket.socket, size: int, deadline: float | None = None) -> bytes | None:
+    """Exactly `size` bytes from the socket, or None if the peer closed it first; `TimeoutError` if they are not
+    all there by `deadline` (time.monotonic(); None = the socket's own timeout per recv). The deadline is for the
+    whole message, so a peer trickling one byte at a time cannot hold the connection."""
     buf = bytearray(size)
     view, got = memoryview(buf), 0
     while got < size:
+        if deadline is not None:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise TimeoutError(f"{size - got} of {size} bytes missing at the deadline")
+            sock.settimeout(remaining)
         n = sock.recv_into(view[got:])
         if n == 0:
             return None
@@ -115,8 +126,14 @@ class UsbipSession:
             self.close()
             writer.join()
 
+    def _lease(self) -> float | None:
+        """Deadline for the next URB: none while the host waits for data (an IN URB is pending), else the lease."""
+        with self._cond:
+            waiting = any(self._pending.values())
+        return None if waiting else time.monotonic() + IMPORT_LEASE_S
+
     def _read_loop(self) -> None:
-        while (header := recv_exact(self._sock, URB_HEADER_SIZE)) is not None:
+        while (header := self._next_header()) is not None:
             message = decode_urb_header(header)
             if message.devid != self._devid:
                 raise UsbipError(f"devid 0x{message.devid:08X} is not this device's 0x{self._devid:08X}")
@@ -132,6 +149,12 @@ class UsbipSession:
             else:
                 raise UsbipError(f"a host does not send {message.command.name}")
 
+    def _next_header(self) -> bytes | None:
+        deadline = self._lease()
+        if deadline is None:
+            self._sock.settimeout(None)
+        return recv_exact(self._sock, URB_HEADER_SIZE, deadline)
+
     def _submit(self, urb: CmdSubmit) -> None:
         if urb.ep == 0:
             self._reply(self._control_transfer(urb))
@@ -140,6 +163,8 @@ class UsbipSession:
             self._reply(RetSubmit(urb.seqnum, 0, len(urb.data)))
         elif urb.ep in self._pending and urb.direction == Direction.IN and urb.transfer_buffer_length > 0:
             with self._cond:
+                if len(self._pending[urb.ep]) >= MAX_PENDING_URBS:
+                    raise UsbipError(f"more than {MAX_PENDING_URBS} IN URBs pending on endpoint {urb.ep}")
                 self._pending[urb.ep].append(urb)
                 self._cond.notify_all()
         elif urb.ep in self._pending and urb.direction == Direction.IN:
@@ -165,11 +190,15 @@ class UsbipSession:
                 if victim is not None:
                     queue.remove(victim)
                     status = URB_UNLINKED
+            if sum(map(len, self._replies)) > MAX_REPLY_BYTES:
+                raise UsbipError(f"the host left more than {MAX_REPLY_BYTES} bytes of replies unread")
             self._replies.append(RetUnlink(command.seqnum, status).encode())
             self._cond.notify_all()
 
     def _reply(self, message: RetSubmit) -> None:
         with self._cond:
+            if sum(map(len, self._replies)) > MAX_REPLY_BYTES:
+                raise UsbipError(f"the host left more than {MAX_REPLY_BYTES} bytes of replies unread")
             self._replies.append(message.encode())
             self._cond.notify_all()
 

@@ -1,0 +1,215 @@
+"""Issue 11 regressions on the host side: bounded allocations, replies matched by what they answer, deadlines,
+duplicates never delivered, fresh sessions. Scripted peers and explicit events; no wall-clock result."""
+
+from __future__ import annotations
+
+import socket
+import threading
+
+import pytest
+from device_helpers import CoreHost, core_device
+
+from eyehil.drivers.client import MAX_DRAIN_BYTES, Tracker
+from eyehil.drivers.errors import TrackerError, TrackerTimeoutError
+from eyehil.drivers.links.tcp import TcpPort
+from eyehil.drivers.wire import Wire
+from eyehil.protocols import (
+    Ack,
+    Configure,
+    DeviceState,
+    EyeFeatures,
+    EyeSelect,
+    Features,
+    FrameChunk,
+    GetInfo,
+    Ping,
+    Pong,
+    PupilFlags,
+    Start,
+)
+from eyehil.protocols.enums import Eye, PixelFormat
+from eyehil.protocols.native import HOST_TYPES, encode
+from eyehil.protocols.stream import NativeReceiver, Received
+
+GENEROUS_S = 60.0
+
+
+class ScriptedDevice:
+    """A SerialLike whose device answers each host command with `answer(header, message) -> [messages]`."""
+
+    def __init__(self, answer, preload: bytes = b"") -> None:
+        self.answer, self.timeout = answer, 0.0
+        self.rx = NativeReceiver(accept=HOST_TYPES)
+        self.out = bytearray(preload)
+        self.seq = 0
+
+    def write(self, data: bytes) -> int:
+        for event in self.rx.feed(data):
+            if isinstance(event, Received):
+                for message in self.answer(event.header, event.message):
+                    self.out += encode(message, self.seq, 1_000)
+                    self.seq += 1
+        return len(data)
+
+    def read(self, size: int = 1) -> bytes:
+        data = bytes(self.out[:size])
+        del self.out[:size]
+        return data
+
+    def close(self) -> None:
+        pass
+
+
+def _info():
+    core = core_device()
+    try:
+        return core.info
+    finally:
+        core.close()
+
+
+INFO = _info()
+
+
+def _honest(header, message):
+    if isinstance(message, GetInfo):
+        return [INFO]
+    if isinstance(message, Ping):
+        return [Pong(message.nonce, header.timestamp_us, 5)]
+    if type(message).__name__ == "GetStatus":
+        from eyehil.protocols import Status
+
+        return [Status()]
+    return [Ack(header.seq, header.msg_type)]
+
+
+# --- finding 6: replies carry what they answer ----------------------------------------------------------------------
+def test_an_ack_in_place_of_device_info_is_a_tracker_error_not_an_attribute_error() -> None:
+    def liar(header, message):
+        return [Ack(header.seq, header.msg_type)] if isinstance(message, GetInfo | Ping) else _honest(header, message)
+
+    with pytest.raises(TrackerTimeoutError):
+        Tracker(ScriptedDevice(liar), response_timeout=0.01, retries=1)
+
+
+def test_replies_left_for_a_departed_host_do_not_answer_the_next_one() -> None:
+    stale = b"".join(encode(Ack(seq, 0x03), 90_000 + seq, 0) for seq in range(5_000))
+    stale += b"".join(encode(INFO, 95_000 + k, 0) for k in range(3))
+    tracker = Tracker(ScriptedDevice(_honest, preload=stale), response_timeout=GENEROUS_S)
+    assert tracker.info == INFO
+    assert tracker.stats.stale_replies >= 5_000
+
+
+def test_sessions_start_at_random_sequence_numbers() -> None:
+    bases = {Tracker(ScriptedDevice(_honest), handshake=False).wire.seq for _ in range(8)}
+    assert len(bases) == 8
+
+
+def test_an_ack_for_our_seq_but_another_type_is_not_taken() -> None:
+    def wrong_type(header, message):
+        return [Ack(header.seq, 0x06)] if isinstance(message, Configure) else _honest(header, message)
+
+    tracker = Tracker(ScriptedDevice(wrong_type), response_timeout=0.01, retries=0)
+    with pytest.raises(TrackerTimeoutError):
+        tracker.configure(rate_hz=250)
+    assert tracker.stats.mismatched_replies == 1
+
+
+# --- finding 5: the host allocates only plausible images ------------------------------------------------------------
+def test_a_huge_frame_chunk_claim_is_refused_without_allocating() -> None:
+    chunk = FrameChunk(1, Eye.RIGHT, PixelFormat.MONO16, 16384, 16384, 0, 0, 0, 1, 0, b"\x00" * 8)
+    wire = Wire(ScriptedDevice(_honest, preload=encode(chunk, 1, 0)))
+    wire.pump(0)
+    assert wire.stats.images_refused == 1 and not wire.assembler._partial and not wire.images
+
+
+# --- finding 11: duplicates never reach the application; loss counted once -----------------------------------------
+def _features(frame_id: int) -> Features:
+    eye = EyeFeatures(Eye.RIGHT, PupilFlags.DETECTED, 1.0, 2.0, 3.0, 2.0, 0.0, 1.0)
+    return Features(frame_id, (eye,))
+
+
+def test_duplicated_and_reordered_samples_are_dropped_and_loss_is_exact() -> None:
+    frames = {seq: encode(_features(seq), seq, seq) for seq in range(100)}
+    order = list(range(100))
+    order.insert(10, 9)  # duplicate of 9
+    order[20], order[21] = order[21], order[20]  # 20 arrives after 21 (late: lost to the application)
+    order.remove(50)  # lost
+    wire = Wire(ScriptedDevice(_honest, preload=b"".join(frames[s] for s in order)))
+    while wire.pump(0):
+        pass
+    ids = [s.frame_id for s in wire.samples]
+    assert len(ids) == len(set(ids)) and ids == sorted(ids)
+    assert wire.stats.duplicates_dropped == 2
+    assert wire.stats.lost_frames == 100 - len(ids) == 2  # 20 (late) and 50
+
+
+# --- finding 9: every blocking host call has a deadline ---------------------------------------------------------------
+class EndlessLink:
+    """A link that always has another sample to read."""
+
+    timeout = 0.0
+
+    def __init__(self) -> None:
+        self.seq = 0
+        self.read_bytes = 0
+
+    def read(self, size: int = 1) -> bytes:
+        data = encode(_features(self.seq), self.seq, 0)
+        self.seq += 1
+        self.read_bytes += len(data)
+        return data
+
+    def write(self, data: bytes) -> int:
+        return len(data)
+
+    def close(self) -> None:
+        pass
+
+
+def test_drain_returns_from_a_link_that_never_pauses() -> None:
+    link = EndlessLink()
+    tracker = Tracker(link, handshake=False)
+    result: list = []
+    worker = threading.Thread(target=lambda: result.append(tracker.drain(max_s=1e9, max_bytes=20_000)), daemon=True)
+    worker.start()
+    worker.join(GENEROUS_S)
+    assert result and result[0], "drain() did not return"
+    assert 20_000 <= link.read_bytes < 20_000 + 100
+    assert MAX_DRAIN_BYTES < 64 * 1024 * 1024  # the default is bounded too
+
+
+def test_tcp_write_to_a_peer_that_never_reads_raises() -> None:
+    server = socket.create_server(("127.0.0.1", 0))
+    port = TcpPort("127.0.0.1", server.getsockname()[1], write_timeout=0.2)
+    peer, _ = server.accept()
+    try:
+        with pytest.raises(TimeoutError):
+            for _ in range(10_000):
+                port.write(b"\x00" * 65536)
+    finally:
+        port.close()
+        peer.close()
+        server.close()
+
+
+# --- finding 7: a new connection's session is fresh -------------------------------------------------------------------
+def test_a_new_connection_finds_the_device_idle_and_configurable() -> None:
+    core = core_device()
+    try:
+        host = CoreHost(core)
+        host.send(Start())
+        core.clock.now += 100_000
+        core.poll()
+        assert core.pending > 0
+        core.connection_reset()
+        assert core.state is DeviceState.IDLE and core.pending == 0
+        host = CoreHost(core)
+        seq = host.send(Configure(2, 500, EyeSelect.RIGHT))
+        assert host.messages() == [Ack(seq, Configure.TYPE)]
+    finally:
+        core.close()
+
+
+def test_tracker_error_tree_covers_reply_mismatch() -> None:
+    assert issubclass(TrackerTimeoutError, TrackerError)
