@@ -122,6 +122,11 @@ def unpack(frames: Sequence[bytes]) -> tuple[str, dict[str, Any]]:
     return topic, payload
 
 
+#: the largest Pupil time (s) a client may set with ``T`` (about 317 years; Pupil time is a monotonic clock's
+#: seconds, so anything larger is an error, and it keeps the device's integer microseconds far from overflow)
+MAX_PUPIL_TIME_S = 1e10
+
+
 @dataclass(frozen=True)
 class Request:
     """A parsed Pupil Remote request: `kind` and its argument (name, float, text or frames)."""
@@ -136,7 +141,7 @@ def parse_request(frames: Sequence[bytes]) -> Request:
     ``SUB_PORT`` and ``PUB_PORT`` exactly, then by the FIRST character (``R`` with the session name from the
     third character on, ``r``, ``T`` with the float from the third character, ``t``, ``v``), except ``C`` and
     ``c``, which must be the whole request. ``T`` with no finite float is `time_sync_failed` (Pupil's reply
-    names the text that is no float; we also refuse nan and inf)."""
+    names the text that is no float; we also refuse nan, inf and |T| > `MAX_PUPIL_TIME_S`)."""
     if len(frames) > 1:
         return Request("forward", list(frames))
     try:
@@ -154,7 +159,9 @@ def parse_request(frames: Sequence[bytes]) -> Request:
             value = float(text[2:])
         except ValueError:
             return Request("time_sync_failed", text[2:])
-        return Request("time_sync", value) if math.isfinite(value) else Request("time_sync_failed", text[2:])
+        if not (math.isfinite(value) and abs(value) <= MAX_PUPIL_TIME_S):
+            return Request("time_sync_failed", text[2:])
+        return Request("time_sync", value)
     plain_kinds = {"r": "record_stop", "t": "time_query", "v": "version"}
     return Request(plain_kinds[first]) if first in plain_kinds else Request("unknown", text)
 

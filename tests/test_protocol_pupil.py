@@ -129,3 +129,19 @@ def test_glint_entries_and_replies() -> None:
     assert (REPLY_FORWARDED, REPLY_TIMESYNC, REPLY_UNKNOWN, REPLY_OK) == (
         "Message forwarded.", "Timesync successful.", "Unknown command.", "OK")
     assert FRAME_FORMATS == ("gray", "bgr", "jpeg")
+
+
+@pytest.mark.parametrize("text", ["T 1e300", "T -1e300", "T 1e10000", "T 10000000000.5"])
+def test_time_sync_beyond_the_range_is_refused(text: str) -> None:
+    """Issue 11, finding 11: ``T 1e300`` was accepted as a clock."""
+    assert parse_request([text.encode()]).kind == "time_sync_failed"
+
+
+def test_a_pupil_time_far_out_never_raises_on_the_device() -> None:
+    """Issue 11: a timestamp of 1.8e302 s overflowed the device's integer microseconds."""
+    from eyehil.emulator.device.clock import make_clock
+    from eyehil.emulator.device.pupil.datums import PupilTime
+
+    pt = PupilTime(make_clock("fast"))
+    for t in (1.8e302, -1e308, float("inf"), float("nan"), 9.2e12):
+        assert abs(pt.to_us(t)) <= 2**62

@@ -18,6 +18,7 @@ axes and diameter 0. Glints (one per LED, our extra key) carry `valid`; invalid 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -48,8 +49,12 @@ class PupilTime:
         return np.asarray(t_us, dtype=np.float64) / 1e6 + self.offset_s
 
     def to_us(self, t_s: float) -> int:
-        """Device time (us) of a Pupil time (s)."""
-        return round((t_s - self.offset_s) * 1e6)
+        """Device time (us) of a Pupil time (s); a time that is not finite or beyond +-2**62 us is clipped there
+        (a peer's timestamp must never raise on the device thread)."""
+        us = (float(t_s) - self.offset_s) * 1e6
+        if not math.isfinite(us):
+            us = 0.0 if math.isnan(us) else math.copysign(2.0**62, us)
+        return round(min(max(us, -(2.0**62)), 2.0**62))
 
     def set_now(self, value_s: float) -> None:
         """Make Pupil time equal `value_s` now (``T <float>``)."""
