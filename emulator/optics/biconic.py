@@ -152,13 +152,24 @@ class Biconic:
         return valid & (np.abs(z + s) <= tol)
 
     def intersect(self, p: np.ndarray, u: np.ndarray, far: bool = False) -> tuple[np.ndarray, np.ndarray]:
-        """Ray p + t u (u unit, eye-local) meets the cap: (t, valid); the nearest t > 0, or the farthest if `far`."""
-        px, py, pz = self._to_surface(p)
-        ux, uy, uz = self._to_surface(u, point=False)
+        """Ray p + t u (u unit, eye-local) meets the cap: (t, valid); the nearest t > 0, or the farthest if `far`.
+
+        The guide conic's other root is refined too where the first one does not end on the cap (a chord
+        whose guide root falls beyond the aperture)."""
+        ray = self._to_surface(p) + self._to_surface(u, point=False)
         cbar = 0.5 * (1.0 / self.radius_x + 1.0 / self.radius_y)
-        kbar = 0.5 * (self.conic_x + self.conic_y)
-        guide = Conic(np.zeros_like(cbar), 1.0 / cbar, kbar, self.aperture * 1.25)
-        t, ok = guide.intersect(np.stack([px, py, pz], axis=-1), np.stack([ux, uy, uz], axis=-1), far=far)
+        guide = Conic(np.zeros_like(cbar), 1.0 / cbar, 0.5 * (self.conic_x + self.conic_y), self.aperture * 1.25)
+        origin, direction = np.stack(ray[:3], axis=-1), np.stack(ray[3:], axis=-1)
+        t, valid = self._refine(ray, *guide.intersect(origin, direction, far=far))
+        if np.any(~valid):
+            t2, valid2 = self._refine(ray, *guide.intersect(origin, direction, far=not far))
+            use = ~valid & valid2
+            t, valid = np.where(use, t2, t), valid | use
+        return np.where(valid, t, np.nan), valid
+
+    def _refine(self, ray: tuple[np.ndarray, ...], t: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Newton on f(t) = -z'(t) - s(x'(t), y'(t)) from the guide root t (module docstring)."""
+        px, py, pz, ux, uy, uz = ray
         t = np.where(ok, t, 0.0)
         for _ in range(MAX_NEWTON):
             s, _, sx, sy = self._sag(px + t * ux, py + t * uy, gradient=True)
@@ -172,5 +183,4 @@ class Biconic:
                 break
         s, inside = self._sag(px + t * ux, py + t * uy)
         residual = np.abs(pz + t * uz + s)
-        valid = ok & inside & (residual <= SURFACE_TOLERANCE_MM) & (t > EPS_T)
-        return np.where(valid, t, np.nan), valid
+        return t, ok & inside & (residual <= SURFACE_TOLERANCE_MM) & (t > EPS_T)
