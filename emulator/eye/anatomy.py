@@ -58,15 +58,16 @@ def gka_stop(stop_radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def tilted_about_centre(eyes: EyeModel, tilt_h_deg: np.ndarray | float, tilt_v_deg: np.ndarray | float = 0.0
                         ) -> EyeModel:
-    """The cornea turned by (h nasal, v superior) deg about the centre of its anterior ellipsoid (axial
-    semi-axis a = R / (1 + Q) of the mean radius behind the apex), the apex moving with it."""
+    """The cornea turned by a further (h nasal, v superior) deg about the centre of its anterior ellipsoid (axial
+    semi-axis a = R / (1 + Q) of the mean radius behind the apex), the apex moving with it. The angles add to
+    the eye's own tilt (exact for an untilted cornea, a small-angle composition otherwise)."""
     h, v = (np.broadcast_to(np.radians(np.asarray(x, dtype=float)), eyes.shape) for x in (tilt_h_deg, tilt_v_deg))
     a = eyes.anterior_mean_radius / (1.0 + 0.5 * (eyes.anterior_conic + eyes.anterior_conic_perp))
     axis = np.stack([np.cos(v) * np.sin(h), np.sin(v), np.cos(v) * np.cos(h)], axis=-1)
     centre = np.stack([np.zeros_like(a), np.zeros_like(a), -a], axis=-1)
     offset = centre + a[..., None] * axis  # the turned apex
     return eyes.replace(cornea_offset=eyes.cornea_offset + offset,
-                        cornea_tilt_deg=np.stack([np.degrees(h), np.degrees(v)], axis=-1))
+                        cornea_tilt_deg=eyes.cornea_tilt_deg + np.stack([np.degrees(h), np.degrees(v)], axis=-1))
 
 
 def conditional_astigmatism(eyes: EyeModel, rng: np.random.Generator) -> tuple[np.ndarray, ...]:
