@@ -19,7 +19,7 @@ surface axes x', y', z' as columns, so p_local = rotation (p' ) + vertex. The ca
 contains the apex (the sag formula chooses it) within `aperture` of the surface axis (x'^2 + y'^2).
 
 Intersection has no closed form (the biconic is a quartic): start from the closed-form root of the
-conic of revolution with the mean curvature and mean k, then Newton on f(t) = -z'(t) - s(x'(t), y'(t)),
+quadric of revolution with the mean curvature and mean k, then Newton on f(t) = -z'(t) - s(x'(t), y'(t)),
 f'(t) = -u_z' - s_x u_x' - s_y u_y', until every step is below 1e-13 mm (at most `MAX_NEWTON` steps);
 a hit needs |f| <= 1e-10 mm. Known answer: equal radii and conics give the conic's root to 1e-12 mm.
 
@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.optics.conic import EPS_T, Conic
+from emulator.optics.conic import EPS_T
 
 MAX_NEWTON = 12
 SURFACE_TOLERANCE_MM = 1e-10
@@ -101,21 +101,21 @@ class Biconic:
         return out + self.vertex if point else out
 
     # --- shape ---------------------------------------------------------------------------------------
-    def _sag(self, x: np.ndarray, y: np.ndarray, gradient: bool = False):
+    def _sag(self, x: np.ndarray, y: np.ndarray, gradient: bool = False, check: bool = True):
+        """Sag s (and whether it exists, unless `check` is False; and its gradient s_x, s_y if `gradient`)."""
         cx, cy = 1.0 / self.radius_x, 1.0 / self.radius_y
-        kx, ky = 1.0 + self.conic_x, 1.0 + self.conic_y
         x2, y2 = x * x, y * y
         s_num = cx * x2 + cy * y2
-        disc = 1.0 - kx * cx * cx * x2 - ky * cy * cy * y2
-        valid = (disc > 0) & (x2 + y2 <= self.aperture**2)
+        disc = 1.0 - ((1.0 + self.conic_x) * cx * cx) * x2 - ((1.0 + self.conic_y) * cy * cy) * y2
+        valid = ((disc > 0) & (x2 + y2 <= self.aperture**2)) if check else None
         d = np.sqrt(np.maximum(disc, 1e-300))
         one_d = 1.0 + d
         s = s_num / one_d
         if not gradient:
             return s, valid
         common = s_num / (d * one_d * one_d)
-        sx = x * (2.0 * cx / one_d + common * kx * cx * cx)
-        sy = y * (2.0 * cy / one_d + common * ky * cy * cy)
+        sx = x * (2.0 * cx / one_d + common * ((1.0 + self.conic_x) * cx * cx))
+        sy = y * (2.0 * cy / one_d + common * ((1.0 + self.conic_y) * cy * cy))
         return s, valid, sx, sy
 
     def mean_radius(self) -> np.ndarray:
@@ -132,6 +132,13 @@ class Biconic:
         """The surface point (..., 3, eye-local) at surface coordinates q = (x', y') (..., 2), and whether it exists."""
         s, valid = self._sag(q[..., 0], q[..., 1])
         return self._from_surface(q[..., 0], q[..., 1], -s), valid
+
+    def point_normal(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`point(q)` and the unit outward normal there in one pass: (point (..., 3), normal (..., 3), valid)."""
+        s, valid, sx, sy = self._sag(q[..., 0], q[..., 1], gradient=True)
+        norm = np.sqrt(sx * sx + sy * sy + 1.0)
+        point = self._from_surface(q[..., 0], q[..., 1], -s)
+        return point, self._from_surface(sx / norm, sy / norm, 1.0 / norm, point=False), valid
 
     def coords(self, p: np.ndarray) -> np.ndarray:
         """Surface coordinates (x', y') (..., 2) of eye-local points p (..., 3) (their foot on the x'y' plane)."""
@@ -154,25 +161,42 @@ class Biconic:
     def intersect(self, p: np.ndarray, u: np.ndarray, far: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Ray p + t u (u unit, eye-local) meets the cap: (t, valid); the nearest t > 0, or the farthest if `far`.
 
-        The guide conic's other root is refined too where the first one does not end on the cap (a chord
-        whose guide root falls beyond the aperture)."""
+        The guide is the quadric of revolution with the mean curvature and mean k, without its cap and aperture
+        (the sag picks the apex sheet); its other root is refined too where the first does not end on the cap."""
         ray = self._to_surface(p) + self._to_surface(u, point=False)
-        cbar = 0.5 * (1.0 / self.radius_x + 1.0 / self.radius_y)
-        guide = Conic(np.zeros_like(cbar), 1.0 / cbar, 0.5 * (self.conic_x + self.conic_y), self.aperture * 1.25)
-        origin, direction = np.stack(ray[:3], axis=-1), np.stack(ray[3:], axis=-1)
-        t, valid = self._refine(ray, *guide.intersect(origin, direction, far=far))
+        t_near, t_far, ok = self._guide_roots(ray)
+        t, valid = self._refine(ray, t_far if far else t_near, ok)
         if np.any(~valid):
-            t2, valid2 = self._refine(ray, *guide.intersect(origin, direction, far=not far))
+            t2, valid2 = self._refine(ray, t_near if far else t_far, ok)
             use = ~valid & valid2
             t, valid = np.where(use, t2, t), valid | use
         return np.where(valid, t, np.nan), valid
+
+    def _guide_roots(self, ray: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(near, far) positive roots of the mean quadric x^2 + y^2 + k w^2 - 2 R w = 0 (w = -z) and whether any."""
+        px, py, pz, ux, uy, uz = ray
+        c = 0.5 * (1.0 / self.radius_x + 1.0 / self.radius_y)
+        k = 1.0 + 0.5 * (self.conic_x + self.conic_y)
+        # multiplied by c: c (x^2 + y^2) + c k w^2 - 2 w, with w = -(pz + t uz)
+        a = c * (ux * ux + uy * uy + k * uz * uz)
+        b = 2.0 * (c * (px * ux + py * uy + k * pz * uz) + uz)
+        cc = c * (px * px + py * py + k * pz * pz) + 2.0 * pz
+        disc = b * b - 4.0 * a * cc
+        sq = np.sqrt(np.maximum(disc, 0.0))
+        q = -0.5 * (b + np.where(b >= 0, sq, -sq))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r1, r2 = q / a, cc / q
+        lo, hi = np.minimum(r1, r2), np.maximum(r1, r2)
+        near = np.where(lo > EPS_T, lo, hi)
+        ok = (disc >= 0) & np.isfinite(near) & (near > EPS_T)
+        return near, np.where(np.isfinite(hi), hi, near), ok
 
     def _refine(self, ray: tuple[np.ndarray, ...], t: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Newton on f(t) = -z'(t) - s(x'(t), y'(t)) from the guide root t (module docstring)."""
         px, py, pz, ux, uy, uz = ray
         t = np.where(ok, t, 0.0)
         for _ in range(MAX_NEWTON):
-            s, _, sx, sy = self._sag(px + t * ux, py + t * uy, gradient=True)
+            s, _, sx, sy = self._sag(px + t * ux, py + t * uy, gradient=True, check=False)
             f = -(pz + t * uz) - s
             fp = -uz - sx * ux - sy * uy
             with np.errstate(divide="ignore", invalid="ignore"):

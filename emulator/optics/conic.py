@@ -65,6 +65,11 @@ class Conic:
         w, valid = self.sag(np.sum(xy**2, axis=-1))
         return np.concatenate([xy, (self.apex - w)[..., None]], axis=-1), valid
 
+    def point_normal(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`point(q)` and `normal` there: (point (..., 3), unit normal (..., 3), valid)."""
+        p, valid = self.point(q)
+        return p, self.normal(p), valid
+
     def coords(self, p: np.ndarray) -> np.ndarray:
         """The surface coordinates (x, y) (..., 2) of points p (..., 3): the argument of `point`."""
         return p[..., :2]

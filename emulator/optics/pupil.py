@@ -57,9 +57,8 @@ def trace_into_eye(
     """Where a ray entering the anterior cornea at the point above q (..., 2) meets the pupil plane.
 
     The ray comes from the point `source` (..., 3) or travels along the unit `direction` (..., 3)."""
-    a, ok = optics.anterior.point(q)
+    a, na, ok = optics.anterior.point_normal(q)
     d0 = unit(a - source) if direction is None else direction
-    na = optics.anterior.normal(a)
     ok &= _dot(na, d0) < 0
     d1, ok1 = refract(d0, na, optics.n_air, optics.n_cornea)
     t1, ok2 = optics.posterior.intersect(a, d1)
