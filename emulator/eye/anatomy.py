@@ -70,9 +70,9 @@ def tilted_about_centre(eyes: EyeModel, tilt_h_deg: np.ndarray | float, tilt_v_d
                         cornea_tilt_deg=eyes.cornea_tilt_deg + np.stack([np.degrees(h), np.degrees(v)], axis=-1))
 
 
-def conditional_astigmatism(eyes: EyeModel, rng: np.random.Generator) -> tuple[np.ndarray, ...]:
+def conditional_astigmatism(eyes: EyeModel, rng: np.random.Generator | np.ndarray) -> tuple[np.ndarray, ...]:
     """(anterior J0, J45, posterior J0, J45) in D per eye, drawn from the Rozema 2011 normal given the eye's
-    other parameters (module docstring)."""
+    other parameters (module docstring); `rng` may instead be the standard normal deviates (E, 4) to use."""
     e = eyes.as_batch()
     observed = {
         "K_ant_M": 337.2 / e.anterior_mean_radius,
@@ -87,7 +87,8 @@ def conditional_astigmatism(eyes: EyeModel, rng: np.random.Generator) -> tuple[n
     }
     mean, cov = rozema2011().conditional(observed, ASTIGMATISM_NAMES)
     w, v = np.linalg.eigh(cov)
-    draws = mean + rng.standard_normal(mean.shape) @ (v * np.sqrt(np.clip(w, 0.0, None))).T
+    z = rng.standard_normal(mean.shape) if isinstance(rng, np.random.Generator) else np.asarray(rng, dtype=float)
+    draws = mean + z @ (v * np.sqrt(np.clip(w, 0.0, None))).T
     return tuple(draws[:, i] for i in range(len(ASTIGMATISM_NAMES)))
 
 
@@ -100,15 +101,17 @@ def full_anatomy(
     stop: bool = True,
     tilt: bool = True,
 ) -> EyeModel:
-    """`eyes` (a batch, anatomy as right eyes) with the anatomy of the module docstring added, drawn with `rng`
-    in this order: astigmatism, decentration (so switching a later one off leaves the earlier draws alike)."""
+    """`eyes` (a batch, anatomy as right eyes) with the anatomy of the module docstring added. Every deviate is
+    drawn from `rng` whatever is switched on (astigmatism (E, 4), then decentration (E, 2) and its shift with size
+    (E, 2)), so each component of the same generator state is the same with or without the others."""
     e = eyes.as_batch()
     n = len(e)
+    z_astigmatism, z_decentre, z_shift = (rng.standard_normal((n, k)) for k in (4, 2, 2))
     if astigmatism:
-        e = with_power_vectors(e, *conditional_astigmatism(e, rng))
+        e = with_power_vectors(e, *conditional_astigmatism(e, z_astigmatism))
     if decentration:
-        at_4mm = PUPIL_DECENTRE_MEAN_MM + PUPIL_DECENTRE_SD_MM * rng.standard_normal((n, 2))
-        shift = PUPIL_SHIFT_MEAN_MM_PER_MM + PUPIL_SHIFT_SD_MM_PER_MM * rng.standard_normal((n, 2))
+        at_4mm = PUPIL_DECENTRE_MEAN_MM + PUPIL_DECENTRE_SD_MM * z_decentre
+        shift = PUPIL_SHIFT_MEAN_MM_PER_MM + PUPIL_SHIFT_SD_MM_PER_MM * z_shift
         change = 2.0 * e.pupil_radius - PUPIL_REFERENCE_DIAMETER_MM
         e = e.replace(pupil_decentre=e.pupil_decentre + at_4mm + change[:, None] * shift, pupil_shift_per_mm=shift)
     if stop:
