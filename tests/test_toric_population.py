@@ -144,3 +144,18 @@ def test_left_right_mirror_symmetry_of_astigmatic_eyes() -> None:
     spherical = eyes.replace(anterior_radius_perp=eyes.anterior_radius, posterior_radius_perp=eyes.posterior_radius)
     plain = simulate(spherical, scene, targets=targets)
     assert np.max(np.abs(plain.pupil_axes_px - right.pupil_axes_px)) > 0.05
+
+
+def test_eye_specs_for_the_added_anatomy() -> None:
+    from emulator.eye.select import eyes_from_spec
+
+    full, text = eyes_from_spec("published:full", seed=4)
+    assert len(full) == 100 and not full.rotationally_symmetric.any() and "full anatomy" in text
+    again, _ = eyes_from_spec("published:full", seed=4)
+    assert np.array_equal(again.anterior_axis_deg, full.anterior_axis_deg)
+    toric, _ = eyes_from_spec("sample:5:astigmatic", seed=4)
+    plain, _ = eyes_from_spec("sample:5", seed=4)
+    assert not toric.rotationally_symmetric.any() and plain.rotationally_symmetric.all()
+    np.testing.assert_allclose(toric.anterior_mean_radius, plain.anterior_radius, rtol=1e-13)
+    with pytest.raises(ValueError, match="astigmatic"):
+        eyes_from_spec("sample:5:toric")

@@ -1,4 +1,11 @@
-"""Anatomy: EyeModel, the Rozema 2011 population, normative eyes, media (indices)."""
+"""Anatomy: EyeModel, the Rozema 2011 population, normative eyes, media (indices).
+
+Modules: model (EyeModel), biometry (eyes from biometry), posterior (fovea angle, rotation centres, retina),
+surfaces (the optical surfaces of an eye), media (refractive indices), rozema (the Rozema 2011 normal),
+population (sampling it), published (the 100 eyes of Fischer et al. 2023), normative (named eyes),
+astigmatism (power vectors <-> toric radii), anatomy (full_anatomy: astigmatism, decentration, stop, tilt),
+select (choosing eyes).
+"""
 
 from emulator.eye.media import Media
 from emulator.eye.model import EyeModel
