@@ -220,6 +220,12 @@ class EyeModel:
                 f"{e.anterior_conic[i]:+.3f} R_pc {e.posterior_radius[i]:.3f} Q_pc {e.posterior_conic[i]:+.3f} "
                 f"CCT {e.cct[i]:.3f} ACD {e.acd[i]:.3f} pupil {2 * e.pupil_radius[i]:.2f} "
                 f"AL {e.axial_length[i]:.2f} alpha ({e.alpha_h[i]:.2f}, {e.alpha_v[i]:.2f}) deg"
+                + ("" if e.rotationally_symmetric[i] else
+                   f"; toric R_ac {e.anterior_radius[i]:.3f}/{e.anterior_radius_perp[i]:.3f} at "
+                   f"{e.anterior_axis_deg[i]:.0f} deg, R_pc {e.posterior_radius[i]:.3f}/"
+                   f"{e.posterior_radius_perp[i]:.3f} at {e.posterior_axis_deg[i]:.0f} deg, cornea tilt "
+                   f"({e.cornea_tilt_deg[i, 0]:.1f}, {e.cornea_tilt_deg[i, 1]:.1f}) deg, stop e "
+                   f"{e.pupil_eccentricity[i]:.3f}")
             )
         return "\n".join(lines)
 
