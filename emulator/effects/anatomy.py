@@ -7,7 +7,7 @@ the identity at its neutral values.
 |---------------------|------------------------------------|--------------------------------------------------|
 | corneal_astigmatism | anterior_j0_d, anterior_j45_d (D)  | adds a power vector to the anterior cornea        |
 |                     | (posterior_j0_d, posterior_j45_d)  | and, unfitted, to the posterior one              |
-| cornea_tilt         | nasal_deg, superior_deg (deg)      | turns the cornea about its anterior centre        |
+| cornea_tilt         | nasal_deg, superior_deg (deg)      | turns the cornea about a point 14.26 mm deep      |
 | cornea_decentre     | nasal_mm, superior_mm (mm)         | moves the cornea (both surfaces) off the axis     |
 | pupil_ellipse       | eccentricity (1)                   | makes the stop an ellipse of the same area        |
 
@@ -70,7 +70,7 @@ class CornealAstigmatism(Effect):
 
 
 class CorneaTilt(Effect):
-    """Tilt of the cornea (both surfaces) about its anterior ellipsoid's centre (deg nasal, deg superior)."""
+    """Tilt of the cornea (both surfaces) about gkaModelEye's corneal centre, 14.26 mm deep (deg nasal, superior)."""
 
     name = "cornea_tilt"
     reference = ("Navarro, Gonzalez & Hernandez 2006, JOSA A 23:219-232; gkaModelEye (Aguirre 2019) uses 2.5 deg "

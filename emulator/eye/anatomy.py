@@ -19,9 +19,11 @@ pupil centred on it. `full_anatomy` keeps every published parameter of the eyes 
   a horizontal major axis, e > 0 one at 3 pi / 7 (77.1 deg from nasal toward superior, right eye); |e| is
   used. Same area as the circle of the eye's pupil radius. No between-subject spread (the model's mean).
 - Cornea tilt: gkaModelEye's default, after Navarro, Gonzalez & Hernandez 2006 (JOSA A 23:219-232): the
-  corneal ellipsoid turned 2.5 deg about the vertical axis toward the nasal side, about its own centre, so
-  the apex moves a sin(2.5 deg) nasally and a (1 - cos 2.5 deg) back (a = R_ac / (1 + Q_ac), the axial
-  semi-axis). No between-subject spread (none that we could verify).
+  corneal ellipsoid turned 2.5 deg about the vertical axis toward the nasal side, about its own centre, which
+  in gkaModelEye lies 14.26 mm behind the apex; the apex moves 14.26 sin(2.5 deg) = 0.62 mm nasally and
+  0.014 mm back. The pivot stays at that depth for every eye (an eye's own ellipsoid centre, R / (1 + Q),
+  lies up to 39 mm deep for the most prolate published corneas, which would move their apex 1.7 mm). No
+  between-subject spread (none that we could verify).
 
 Every component can be switched off; with all off the eyes come back unchanged.
 """
@@ -46,6 +48,7 @@ PUPIL_SHIFT_SD_MM_PER_MM = np.array([0.02, 0.05])
 GKA_STOP_PARAMS = (-1.743, 4.784, 0.149, 0.103)  # gkaModelEye human stop: (tanh((r + p0) p1) + p2) p3
 GKA_STOP_THETA_DEG = np.degrees(3.0 * np.pi / 7.0)  # right eye, for e > 0; 0 deg for e < 0
 CORNEA_TILT_DEG = 2.5  # nasal, about the vertical axis (gkaModelEye, Navarro 2006)
+CORNEA_PIVOT_DEPTH_MM = 14.26  # gkaModelEye's anterior corneal ellipsoid centre behind the apex (its axial semi-axis)
 ASTIGMATISM_NAMES = ("K_ant_J0", "K_ant_J45", "K_post_J0", "K_post_J45")
 
 
@@ -56,13 +59,13 @@ def gka_stop(stop_radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.abs(e), np.where(e > 0, GKA_STOP_THETA_DEG, 0.0)
 
 
-def tilted_about_centre(eyes: EyeModel, tilt_h_deg: np.ndarray | float, tilt_v_deg: np.ndarray | float = 0.0
-                        ) -> EyeModel:
-    """The cornea turned by a further (h nasal, v superior) deg about the centre of its anterior ellipsoid (axial
-    semi-axis a = R / (1 + Q) of the mean radius behind the apex), the apex moving with it. The angles add to
+def tilted_about_centre(eyes: EyeModel, tilt_h_deg: np.ndarray | float, tilt_v_deg: np.ndarray | float = 0.0,
+                        pivot_depth: float = CORNEA_PIVOT_DEPTH_MM) -> EyeModel:
+    """The cornea turned by a further (h nasal, v superior) deg about the point `pivot_depth` mm behind its apex
+    on the axis (default: gkaModelEye's corneal ellipsoid centre), the apex moving with it. The angles add to
     the eye's own tilt (exact for an untilted cornea, a small-angle composition otherwise)."""
     h, v = (np.broadcast_to(np.radians(np.asarray(x, dtype=float)), eyes.shape) for x in (tilt_h_deg, tilt_v_deg))
-    a = eyes.anterior_mean_radius / (1.0 + 0.5 * (eyes.anterior_conic + eyes.anterior_conic_perp))
+    a = np.full(eyes.shape, float(pivot_depth))
     axis = np.stack([np.cos(v) * np.sin(h), np.sin(v), np.cos(v) * np.cos(h)], axis=-1)
     centre = np.stack([np.zeros_like(a), np.zeros_like(a), -a], axis=-1)
     offset = centre + a[..., None] * axis  # the turned apex
