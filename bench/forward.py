@@ -5,7 +5,7 @@
 points traced. Target (issue "Physics core"): <= 30 s wall on a 2-core machine.
 
 Variant (issue 13): the same 100 eyes with toric corneas (anterior and posterior power vectors drawn
-conditionally on their published parameters, `emulator.eye.anatomy.full_anatomy` with astigmatism only);
+conditionally on their published parameters, `eyehil.emulator.eye.anatomy.full_anatomy` with astigmatism only);
 target: within 1.5x of the symmetric eyes' time, measured in the same run.
 """
 
@@ -15,10 +15,10 @@ import time
 
 import numpy as np
 
-from emulator.eye.anatomy import full_anatomy
-from emulator.eye.published import published_eyes
-from emulator.forward import simulate
-from emulator.scene import load_scene
+from eyehil.emulator.eye.anatomy import full_anatomy
+from eyehil.emulator.eye.published import published_eyes
+from eyehil.emulator.forward import simulate
+from eyehil.emulator.scene import load_scene
 
 TARGET_SECONDS = 30.0
 TARGET_TORIC_RATIO = 1.5

@@ -21,19 +21,19 @@ import json
 import numpy as np
 import pytest
 
-from analysis import experiments
-from analysis.discrepancy import hidden_measured, run_discrepancy
-from analysis.discrepancy_data import Measured, guestrin2006_real, load
-from analysis.discrepancy_guestrin import guestrin_metrics
-from analysis.discrepancy_search import max_evaluations, search_effects
-from analysis.discrepancy_stats import holm
-from emulator import effects
-from emulator.effects import Applied, simulate_with
-from emulator.eye.population import sample
-from emulator.eye.published import published_eyes
-from emulator.forward import simulate
-from emulator.scene import load_scene
-from eyehil_cli import main
+from eyehil.analysis.discrepancy.data import Measured, guestrin2006_real, load
+from eyehil.analysis.discrepancy.guestrin import guestrin_metrics
+from eyehil.analysis.discrepancy.search import max_evaluations, search_effects
+from eyehil.analysis.discrepancy.stats import holm
+from eyehil.analysis.discrepancy.workflow import hidden_measured, run_discrepancy
+from eyehil.analysis.study import experiments
+from eyehil.cli import main
+from eyehil.emulator import effects
+from eyehil.emulator.effects import Applied, simulate_with
+from eyehil.emulator.eye.population import sample
+from eyehil.emulator.eye.published import published_eyes
+from eyehil.emulator.forward import simulate
+from eyehil.emulator.scene import load_scene
 
 SEARCH_EYES = 12
 HIDDEN = [("pupil_change", {"delta_diameter_mm": -0.7}, 0.10),

@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from emulator.eye.normative import NORMATIVE_NAMES, normative_eye, normative_media
-from emulator.eye.population import parameter_table
-from emulator.eye.published import HYPERBOLOID_CLIP, conditional_lens_power, published_biometry, published_eyes
-from emulator.eye.rozema import rozema2011
+from eyehil.emulator.eye.normative import NORMATIVE_NAMES, normative_eye, normative_media
+from eyehil.emulator.eye.population import parameter_table
+from eyehil.emulator.eye.published import HYPERBOLOID_CLIP, conditional_lens_power, published_biometry, published_eyes
+from eyehil.emulator.eye.rozema import rozema2011
 
 #: sha256 of the reference table fischer2023_eyes.csv: its 12 columns (eye, R_ant_cornea_mm, ..., pupil_diameter_mm)
 #: stacked as a (100, 12) little-endian float64 array, pinned when the package's copy was checked against it.
@@ -183,8 +183,8 @@ def test_unknown_normative_name():
 
 
 def test_gka_eye_is_gkamodeleyes_tilted_triaxial_cornea_and_elliptical_stop():
-    from emulator.eye.surfaces import biconic_cornea
-    from emulator.optics.biconic import rotation_matrix
+    from eyehil.emulator.eye.surfaces import biconic_cornea
+    from eyehil.emulator.optics.biconic import rotation_matrix
 
     eye = normative_eye("gka")
     front, back = biconic_cornea(eye)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from emulator.eye.population import (
+from eyehil.emulator.eye.population import (
     REJECTION_REASONS,
     STUDY_KEYS,
     TABLE4_KEYS,
@@ -24,7 +24,7 @@ from emulator.eye.population import (
     sample_raw,
     study_parameters,
 )
-from emulator.eye.rozema import RawDraws, rozema2011, thick_lens_index
+from eyehil.emulator.eye.rozema import RawDraws, rozema2011, thick_lens_index
 
 #: sha256 of the covariance of the reference table rozema2011_cov.csv (little-endian float64, row-major), pinned
 #: when the package's copy was checked against it, so that the tests read only the package's own data.

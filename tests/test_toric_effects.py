@@ -8,11 +8,11 @@ import importlib
 import numpy as np
 import pytest
 
-from emulator.effects.anatomy import ANATOMY_EFFECTS
-from emulator.eye.astigmatism import ANTERIOR_DN, POSTERIOR_DN, power_vector
-from emulator.eye.published import published_eyes
-from emulator.forward import simulate
-from emulator.scene import load_scene
+from eyehil.emulator.effects.anatomy import ANATOMY_EFFECTS
+from eyehil.emulator.eye.astigmatism import ANTERIOR_DN, POSTERIOR_DN, power_vector
+from eyehil.emulator.eye.published import published_eyes
+from eyehil.emulator.forward import simulate
+from eyehil.emulator.scene import load_scene
 
 
 def _effect(name: str):

@@ -9,15 +9,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from emulator.eye.anatomy import full_anatomy, gka_stop
-from emulator.eye.astigmatism import ANTERIOR_DN, POSTERIOR_DN, power_vector, principal_radii
-from emulator.eye.model import EyeModel
-from emulator.eye.population import sample, study_parameters
-from emulator.eye.published import published_eyes
-from emulator.eye.rozema import rozema2011
-from emulator.forward import simulate
-from emulator.optics.camera import PinholeCamera
-from emulator.scene import Scene, load_scene
+from eyehil.emulator.eye.anatomy import full_anatomy, gka_stop
+from eyehil.emulator.eye.astigmatism import ANTERIOR_DN, POSTERIOR_DN, power_vector, principal_radii
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.eye.population import sample, study_parameters
+from eyehil.emulator.eye.published import published_eyes
+from eyehil.emulator.eye.rozema import rozema2011
+from eyehil.emulator.forward import simulate
+from eyehil.emulator.optics.camera import PinholeCamera
+from eyehil.emulator.scene import Scene, load_scene
 
 REFERENCE = Path(__file__).with_name("toric_reference_2d493f9.npz")
 N_LARGE = 200_000
@@ -147,7 +147,7 @@ def test_left_right_mirror_symmetry_of_astigmatic_eyes() -> None:
 
 
 def test_eye_specs_for_the_added_anatomy() -> None:
-    from emulator.eye.select import eyes_from_spec
+    from eyehil.emulator.eye.select import eyes_from_spec
 
     full, text = eyes_from_spec("published:full", seed=4)
     assert len(full) == 100 and not full.rotationally_symmetric.any() and "full anatomy" in text

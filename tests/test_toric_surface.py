@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq, root
 
-from emulator.optics.biconic import Biconic, rotation_matrix
-from emulator.optics.conic import Conic, Plane
-from emulator.optics.glint import solve_glints
-from emulator.optics.pupil import CorneaOptics, pupil_boundary, solve_exit_points
+from eyehil.emulator.optics.biconic import Biconic, rotation_matrix
+from eyehil.emulator.optics.conic import Conic, Plane
+from eyehil.emulator.optics.glint import solve_glints
+from eyehil.emulator.optics.pupil import CorneaOptics, pupil_boundary, solve_exit_points
 
 RNG = np.random.default_rng(13)
 

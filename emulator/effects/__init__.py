@@ -2,7 +2,7 @@
 
 The table maps a name to "module:Class"; a module is imported only when its effect is asked for
 (python-can's interface table). Every effect documents its physics, units, frame and a reference, and
-is the identity at its parameters' neutral values (`emulator.effects.base`).
+is the identity at its parameters' neutral values (`eyehil.emulator.effects.base`).
 
 | name            | stage    | fitted parameters            | acts on                                        |
 |-----------------|----------|------------------------------|------------------------------------------------|
@@ -12,7 +12,7 @@ is the identity at its parameters' neutral values (`emulator.effects.base`).
 | lens_distortion | model    | k1 (normalised)              | the simulated camera; the host stays pinhole   |
 | head_roll       | model    | roll_deg (deg)               | head (eye) roll at the validation heads        |
 
-    from emulator.effects import Applied, get, simulate_with
+    from eyehil.emulator.effects import Applied, get, simulate_with
     noise = get("feature_noise")
     features = simulate_with(eyes, scene, [Applied.of(noise, sigma_px=0.1)], rng=np.random.default_rng(1))
 """
@@ -21,15 +21,15 @@ from __future__ import annotations
 
 import importlib
 
-from emulator.effects.base import SESSIONS, Applied, Effect, Parameter
-from emulator.effects.run import sessions, simulate_with
+from eyehil.emulator.effects.base import SESSIONS, Applied, Effect, Parameter
+from eyehil.emulator.effects.run import sessions, simulate_with
 
 EFFECTS: dict[str, str] = {
-    "feature_noise": "emulator.effects.noise:FeatureNoise",
-    "pupil_decentre": "emulator.effects.pupil:PupilDecentre",
-    "pupil_change": "emulator.effects.pupil:PupilChange",
-    "lens_distortion": "emulator.effects.scene:LensDistortion",
-    "head_roll": "emulator.effects.scene:HeadRoll",
+    "feature_noise": "eyehil.emulator.effects.noise:FeatureNoise",
+    "pupil_decentre": "eyehil.emulator.effects.pupil:PupilDecentre",
+    "pupil_change": "eyehil.emulator.effects.pupil:PupilChange",
+    "lens_distortion": "eyehil.emulator.effects.scene:LensDistortion",
+    "head_roll": "eyehil.emulator.effects.scene:HeadRoll",
 }
 
 

@@ -1,6 +1,6 @@
 """Anatomy beyond the published study as named effects: toric corneas, corneal tilt and decentration, an
 elliptical stop (issue 13). Each acts before ray tracing (stage "model", every session) on the eyes' own
-anatomy (`emulator.eye.model`: right-eye frame, x nasal, y superior; left eyes mirrored by the tracer) and is
+anatomy (`eyehil.emulator.eye.model`: right-eye frame, x nasal, y superior; left eyes mirrored by the tracer) and is
 the identity at its neutral values.
 
 | name                | fitted parameters                  | acts on                                          |
@@ -11,7 +11,7 @@ the identity at its neutral values.
 | cornea_decentre     | nasal_mm, superior_mm (mm)         | moves the cornea (both surfaces) off the axis     |
 | pupil_ellipse       | eccentricity (1)                   | makes the stop an ellipse of the same area        |
 
-Registration: `ANATOMY_EFFECTS` maps each name to "module:Class" in the form of `emulator.effects.EFFECTS`
+Registration: `ANATOMY_EFFECTS` maps each name to "module:Class" in the form of `eyehil.emulator.effects.EFFECTS`
 (the table the discrepancy workflow reads); merge it there to make the names known to `effects.get`.
 The pupil centre moving with pupil size is `EyeModel.pupil_shift_per_mm` (used by `with_pupil_diameter`);
 the size change between sessions is the existing `pupil_change` effect.
@@ -23,17 +23,17 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from emulator.effects.base import Effect, Parameter
-from emulator.eye.anatomy import GKA_STOP_THETA_DEG, tilted_about_centre
-from emulator.eye.astigmatism import ANTERIOR_DN, POSTERIOR_DN, power_vector, principal_radii
-from emulator.eye.model import EyeModel
-from emulator.scene import Scene
+from eyehil.emulator.effects.base import Effect, Parameter
+from eyehil.emulator.eye.anatomy import GKA_STOP_THETA_DEG, tilted_about_centre
+from eyehil.emulator.eye.astigmatism import ANTERIOR_DN, POSTERIOR_DN, power_vector, principal_radii
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.scene import Scene
 
 ANATOMY_EFFECTS: dict[str, str] = {
-    "corneal_astigmatism": "emulator.effects.anatomy:CornealAstigmatism",
-    "cornea_tilt": "emulator.effects.anatomy:CorneaTilt",
-    "cornea_decentre": "emulator.effects.anatomy:CorneaDecentre",
-    "pupil_ellipse": "emulator.effects.anatomy:PupilEllipse",
+    "corneal_astigmatism": "eyehil.emulator.effects.anatomy:CornealAstigmatism",
+    "cornea_tilt": "eyehil.emulator.effects.anatomy:CorneaTilt",
+    "cornea_decentre": "eyehil.emulator.effects.anatomy:CorneaDecentre",
+    "pupil_ellipse": "eyehil.emulator.effects.anatomy:PupilEllipse",
 }
 
 

@@ -1,6 +1,6 @@
 """The interface of a model extension ("effect"): named parameters, and two hooks into the forward model.
 
-An effect acts at one or both of two stages of `simulate_with` (`emulator.effects.run`):
+An effect acts at one or both of two stages of `simulate_with` (`eyehil.emulator.effects.run`):
 
 - `apply(eyes, scene, values, session) -> (eyes, scene)`: before ray tracing, on the anatomy (an
   `EyeModel` batch) or on the scene (camera, head positions). `session` is "calibration" (head position 0)
@@ -23,9 +23,9 @@ from typing import ClassVar
 
 import numpy as np
 
-from emulator.eye.model import EyeModel
-from emulator.features import Features
-from emulator.scene import Scene
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.features import Features
+from eyehil.emulator.scene import Scene
 
 SESSIONS = ("calibration", "validation")
 

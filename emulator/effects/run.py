@@ -15,11 +15,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from emulator.effects.base import Applied
-from emulator.eye.model import EyeModel
-from emulator.features import Features
-from emulator.forward import simulate
-from emulator.scene import HeadPose, Scene
+from eyehil.emulator.effects.base import Applied
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.features import Features
+from eyehil.emulator.forward import simulate
+from eyehil.emulator.scene import HeadPose, Scene
 
 
 def sessions(scene: Scene) -> list[tuple[str, tuple[HeadPose, ...]]]:
@@ -31,7 +31,7 @@ def sessions(scene: Scene) -> list[tuple[str, tuple[HeadPose, ...]]]:
 
 def simulate_with(eyes: EyeModel, scene: Scene, applied: Sequence[Applied] = (), *,
                   rng: np.random.Generator | None = None, **kwargs) -> Features:
-    """Features of `eyes` in `scene` with `applied` effects; `kwargs` go to `emulator.forward.simulate`."""
+    """Features of `eyes` in `scene` with `applied` effects; `kwargs` go to `eyehil.emulator.forward.simulate`."""
     parts = [simulate_session(eyes, scene, applied, session, heads, **kwargs) for session, heads in sessions(scene)]
     return perturb(join_heads(parts, scene), applied, rng)
 

@@ -32,9 +32,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from emulator.eye.model import EyeModel
-from emulator.eye.population import with_power_vectors
-from emulator.eye.rozema import rozema2011
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.eye.population import with_power_vectors
+from eyehil.emulator.eye.rozema import rozema2011
 
 __all__ = ["CORNEA_TILT_DEG", "PUPIL_DECENTRE_MEAN_MM", "PUPIL_DECENTRE_SD_MM", "PUPIL_SHIFT_MEAN_MM_PER_MM",
            "PUPIL_SHIFT_SD_MM_PER_MM", "conditional_astigmatism", "full_anatomy", "gka_stop",

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from emulator.eye.model import EyeModel
+from eyehil.emulator.eye.model import EyeModel
 
 
 def eyes_from_spec(spec: str, seed: int = 0) -> tuple[EyeModel, str]:
@@ -21,16 +21,16 @@ def eyes_from_spec(spec: str, seed: int = 0) -> tuple[EyeModel, str]:
     if kind.isdigit() and not arg:
         kind, arg = "sample", kind
     if kind == "published" and arg in ("", "full"):
-        from emulator.eye.published import published_eyes
+        from eyehil.emulator.eye.published import published_eyes
 
         if arg == "full":
-            from emulator.eye.anatomy import full_anatomy
+            from eyehil.emulator.eye.anatomy import full_anatomy
 
             eyes = full_anatomy(published_eyes(), np.random.default_rng(seed))
             return eyes, f"the 100 eyes of Fischer et al. 2023 with full anatomy (seed {seed})"
         return published_eyes(), "the 100 eyes of Fischer et al. 2023"
     if kind == "sample":
-        from emulator.eye.population import sample
+        from eyehil.emulator.eye.population import sample
 
         count, _, option = arg.partition(":")
         if not count.isdigit() or int(count) <= 0 or option not in ("", "astigmatic"):
@@ -39,7 +39,7 @@ def eyes_from_spec(spec: str, seed: int = 0) -> tuple[EyeModel, str]:
         draw = sample(int(count), np.random.default_rng(seed), astigmatism=bool(option))
         return draw.eyes, f"Rozema 2011 population{' (astigmatic)' if option else ''}, seed {seed}: {draw.summary()}"
     if kind == "normative" and arg:
-        from emulator.eye.normative import normative_eye
+        from eyehil.emulator.eye.normative import normative_eye
 
         return normative_eye(arg).as_batch(), f"normative eye {arg}"
     raise ValueError(f"eyes spec {spec!r}: use 'published', 'published:full', 'sample:N[:astigmatic]' or "

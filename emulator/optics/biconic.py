@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.optics.conic import EPS_T
+from eyehil.emulator.optics.conic import EPS_T
 
 MAX_NEWTON = 12
 SURFACE_TOLERANCE_MM = 1e-10
