@@ -6,7 +6,9 @@ chunk of eyes (a chunk keeps memory bounded; `progress` is told after each):
 1. the line of sight of each eye (fixed to the eye; `fixation.line_of_sight`);
 2. targets, camera and LEDs in each head position's frame, relative to each eye's apex;
 3. the pose that fixates each target (`fixation.solve_fixation`, Listing's law) or the given pose;
-4. camera and LEDs into the eye-local (unrotated) frame, where the cornea is a conic about z;
+4. camera and LEDs into the eye-local (unrotated) frame, where the cornea is a conic about z (or a
+   biconic for eyes that are not `rotationally_symmetric`: those are traced in chunks of their own, so a
+   symmetric eye gives bit for bit the features of the published model whatever it is batched with);
 5. glints (`optics.glint`) and the apparent pupil boundary (`optics.pupil`, 30 points by default);
 6. back to the scene frame, camera projection, least-squares ellipse fit of the pupil image.
 
@@ -23,7 +25,7 @@ import numpy as np
 
 from eyehil.emulator.eye.media import Media
 from eyehil.emulator.eye.model import EyeModel
-from eyehil.emulator.eye.surfaces import cornea_optics, pupil_centre
+from eyehil.emulator.eye.surfaces import cornea_apex, cornea_centre, cornea_optics, pupil_centre, stop_ellipse
 from eyehil.emulator.features import Features, empty_features
 from eyehil.emulator.fixation import LineOfSight, eye_centres, line_of_sight, listing_torsion, posed, solve_fixation
 from eyehil.emulator.optics.ellipse import fit_ellipse
@@ -92,16 +94,19 @@ def simulate(
         n_targets = len(np.atleast_1d(poses.azimuth))
     out = empty_features(len(eyes), scene, heads, n_targets, n_pupil_points, targets, media.label)
     step = max(1, POINTS_PER_CHUNK // (len(scene.sides) * len(heads) * n_targets * n_pupil_points))
-    for start in range(0, len(eyes), step):
-        chunk = slice(start, min(start + step, len(eyes)))
-        for s, side in enumerate(scene.sides):
-            place = Placement.of(heads, scene.apex(side))
-            result = _simulate_eyes(eyes[chunk].with_laterality(side), scene, place, targets, poses, media,
-                                    n_pupil_points)
-            for name, value in result.items():
-                out.arrays[name][chunk, s] = value
-        if progress is not None:
-            progress(chunk.stop - chunk.start)
+    symmetric = eyes.rotationally_symmetric
+    for group in (np.flatnonzero(symmetric), np.flatnonzero(~symmetric)):
+        for start in range(0, len(group), step):
+            chunk = group[start:start + step]
+            rows = slice(chunk[0], chunk[-1] + 1) if chunk[-1] - chunk[0] + 1 == len(chunk) else chunk
+            for s, side in enumerate(scene.sides):
+                place = Placement.of(heads, scene.apex(side))
+                result = _simulate_eyes(eyes[rows].with_laterality(side), scene, place, targets, poses, media,
+                                        n_pupil_points)
+                for name, value in result.items():
+                    out.arrays[name][rows, s] = value
+            if progress is not None:
+                progress(len(chunk))
     return out
 
 
@@ -146,7 +151,12 @@ def _simulate_eyes(eye: EyeModel, scene: Scene, place: Placement, targets, poses
     leds = to_local(np.broadcast_to(place.scene_to_eye(scene.leds)[None, :, None], shape + scene.leds.shape))
     optics = cornea_optics(eye, media, 3)
     glints = solve_glints(optics.anterior, leds, camera)
-    boundary = pupil_boundary(pupil_centre(eye)[..., :2], eye.pupil_radius, -eye.stop_depth, n_points)
+    if np.all(eye.rotationally_symmetric):
+        boundary = pupil_boundary(pupil_centre(eye)[..., :2], eye.pupil_radius, -eye.stop_depth, n_points)
+    else:
+        eccentricity, axis = stop_ellipse(eye)
+        boundary = pupil_boundary(pupil_centre(eye)[..., :2], eye.pupil_radius, -eye.stop_depth, n_points,
+                                  eccentricity=eccentricity, axis_deg=axis)
     exits = solve_exit_points(optics, camera, boundary[:, None, None])
     out.update(_image_features(scene, to_scene, glints, exits))
     out.update(_ground_truth(eye, los, a, place, to_scene))
@@ -178,9 +188,8 @@ def _image_features(scene: Scene, to_scene, glints, exits) -> dict[str, np.ndarr
 
 
 def _ground_truth(eye: EyeModel, los: LineOfSight, a: np.ndarray, place: Placement, to_scene) -> dict:
-    zeros = np.zeros(len(eye))
-    centre = np.stack([zeros, zeros, -eye.anterior_radius], axis=-1)
-    local = np.stack([centre, pupil_centre(eye), los.origin, np.zeros((len(eye), 3)), los.fovea], axis=1)
+    apex = np.zeros((len(eye), 3)) if np.all(eye.rotationally_symmetric) else cornea_apex(eye)
+    local = np.stack([cornea_centre(eye), pupil_centre(eye), los.origin, apex, los.fovea], axis=1)
     shape = a.shape[:3]
     points = to_scene(np.broadcast_to(local[:, None, None], shape + local.shape[1:]))
     axes = np.stack([np.broadcast_to([0.0, 0.0, 1.0], (len(eye), 3)), los.direction], axis=1)

@@ -1,14 +1,15 @@
 """Published eyes (Fischer et al. 2023) and named normative eyes (eye-model.md sections 1 and 4).
 
-Table 4 of the paper and the shared eye file are two different 100-eye samples (no parameter agrees to the
-rounding shown); the file is checked exactly against the shared copy, against Table 4 within the sampling error
+Table 4 of the paper and the eye file are two different 100-eye samples (no parameter agrees to the
+rounding shown); the package's file is checked exactly against the reference copy (a pinned digest of its
+numbers, so that the tests read only the package's own data), against Table 4 within the sampling error
 of two independent 100-eye samples (5 sqrt(2) SE plus rounding), and the rounding-level agreement is recorded
 as a strict expected failure.
 """
 
 from __future__ import annotations
 
-from pathlib import Path
+import hashlib
 
 import numpy as np
 import pytest
@@ -19,7 +20,11 @@ from eyehil.emulator.eye.population import parameter_table
 from eyehil.emulator.eye.published import HYPERBOLOID_CLIP, conditional_lens_power, published_biometry, published_eyes
 from eyehil.emulator.eye.rozema import rozema2011
 
-SHARED_EYES = Path(__file__).resolve().parents[2] / "shared" / "data" / "fischer2023_eyes.csv"
+#: sha256 of the reference table fischer2023_eyes.csv: its 12 columns (eye, R_ant_cornea_mm, ..., pupil_diameter_mm)
+#: stacked as a (100, 12) little-endian float64 array, pinned when the package's copy was checked against it.
+EYES_SHA256 = "4c6efda9c5f7b499d37681d4d009834d736f0e53f4560b76b4d529c2f0554183"
+EYE_COLUMNS = ("eye", "R_ant_cornea_mm", "Q_ant_cornea", "R_post_cornea_mm", "Q_post_cornea", "R_lens_ant_mm",
+               "R_lens_post_mm", "CCT_mm", "ACD_mm", "lens_thickness_mm", "axial_length_mm", "pupil_diameter_mm")
 #: Table 4 of Fischer et al. 2023: mean, SD, and half the last digit shown (n_lens left out: see below).
 TABLE4 = {
     "R_ant_cornea_mm": (7.79, 0.24, 0.005), "Q_ant_cornea": (-0.21, 0.16, 0.005),
@@ -38,8 +43,15 @@ def test_published_eyes_load():
     assert published_eyes(lens_index=1.40).lens_index[0] == 1.40
 
 
-def test_published_statistics_equal_the_shared_file():
-    shared = np.genfromtxt(SHARED_EYES, delimiter=",", names=True)
+def test_embedded_eye_file_is_the_reference_table():
+    columns = published_biometry()
+    table = np.column_stack([columns[name] for name in EYE_COLUMNS])
+    assert table.shape == (100, 12)
+    assert hashlib.sha256(np.ascontiguousarray(table, dtype="<f8").tobytes()).hexdigest() == EYES_SHA256
+
+
+def test_published_statistics_equal_the_embedded_file():
+    shared = published_biometry()
     table = parameter_table(published_eyes())
     for key, (mean, sd) in table.items():
         if key == "n_lens":
@@ -59,7 +71,7 @@ def test_published_eyes_agree_with_table4_within_sampling_error():
         assert abs(table[key][1] - sd) < 5 * np.sqrt(2) * se_sd + rounding, key
 
 
-@pytest.mark.xfail(strict=True, reason="the shared eye file is not the sample behind Table 4 (e.g. AL 23.62 vs 23.74)")
+@pytest.mark.xfail(strict=True, reason="the eye file is not the sample behind Table 4 (e.g. AL 23.62 vs 23.74)")
 def test_published_eyes_reproduce_table4_to_the_rounding_shown():
     table = parameter_table(published_eyes())
     for key, (mean, sd, rounding) in TABLE4.items():
@@ -168,3 +180,27 @@ def test_unknown_normative_name():
         normative_eye("gullstrand")
     with pytest.raises(ValueError, match="known"):
         normative_media("gullstrand")
+
+
+def test_gka_eye_is_gkamodeleyes_tilted_triaxial_cornea_and_elliptical_stop():
+    from eyehil.emulator.eye.surfaces import biconic_cornea
+    from eyehil.emulator.optics.biconic import rotation_matrix
+
+    eye = normative_eye("gka")
+    front, back = biconic_cornea(eye)
+    p, ok = front.point(np.random.default_rng(4).uniform(-4, 4, (300, 2)))
+    assert ok.all()
+    # gkaModelEye: semi-axes (10.43, 10.27, 14.26) turned 2.5 deg nasally about the ellipsoid's centre (0, 0, -14.26)
+    local = (p - [0.0, 0.0, -14.26]) @ rotation_matrix(0.0, 2.5, 0.0)
+    np.testing.assert_allclose(np.sum((local / [10.43, 10.27, 14.26]) ** 2, axis=1), 1.0, atol=1e-12)
+    q, ok = back.point(np.random.default_rng(5).uniform(-4, 4, (300, 2)))
+    turn = rotation_matrix(0.0, 2.5, 0.0)
+    assert ok.all()  # the posterior surface: its own ellipsoid, turned with the anterior one
+    local = (q - back.vertex - [0.0, 0.0, -13.7716] @ turn.T) @ turn
+    np.testing.assert_allclose(np.sum((local / [9.3027, 9.3027, 13.7716]) ** 2, axis=1), 1.0, atol=1e-12)
+    e = 0.103 * (np.tanh((2.0 - 1.743) * 4.784) + 0.149)  # gkaModelEye's stop eccentricity at a 2 mm stop radius
+    assert float(eye.pupil_eccentricity) == pytest.approx(e, abs=1e-12) and float(eye.pupil_axis_deg) == pytest.approx(
+        540 / 7)
+    assert float(eye.stop_depth) == pytest.approx(3.925)
+    left = normative_eye("gka", "left")
+    assert float(left.pupil_axis_deg) == float(eye.pupil_axis_deg)  # stored as a right eye, mirrored when traced

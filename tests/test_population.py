@@ -8,8 +8,7 @@ SE of a mean = s / sqrt(n); SE of an SD = s sqrt((kurtosis - 1) / (4 n)) (valid 
 
 from __future__ import annotations
 
-import csv
-from pathlib import Path
+import hashlib
 
 import numpy as np
 import pytest
@@ -27,7 +26,18 @@ from eyehil.emulator.eye.population import (
 )
 from eyehil.emulator.eye.rozema import RawDraws, rozema2011, thick_lens_index
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+#: sha256 of the covariance of the reference table rozema2011_cov.csv (little-endian float64, row-major), pinned
+#: when the package's copy was checked against it, so that the tests read only the package's own data.
+COVARIANCE_SHA256 = "58bd380697db6a9f5d50bbebfafe54df2ca3bd39278310791f6702fe9bf57e02"
+#: (name, mean, sd) of rozema2011_mean.csv (Rozema, Atchison & Tassignon 2011), as published.
+PUBLISHED_MEAN_SD = (
+    ("age", 39.878, 12.1582), ("K_ant_M", 43.294, 1.35539), ("K_ant_J0", 0.297, 0.288307),
+    ("K_ant_J45", 0.06, 0.2341), ("ecc_ant", 0.403, 0.174084), ("K_post_M", -6.265, 0.223617),
+    ("K_post_J0", -0.166, 0.0722591), ("K_post_J45", -0.003, 0.0592871), ("ecc_post", 0.151, 0.284274),
+    ("R_lens_ant", 10.427, 1.38881), ("R_lens_post", -6.864, 0.843805), ("lens_thickness", 4.07, 0.51247),
+    ("CCT", 0.545, 0.0326329), ("ACD", 2.87, 0.396359), ("axial_length", 23.667, 1.1122),
+    ("pupil_diameter_scotopic", 6.505, 1.11777), ("lens_power", 22.994, 2.13609),
+)
 N_LARGE = 200_000
 
 
@@ -68,14 +78,15 @@ def test_raw_draws_follow_the_published_normal():
     assert published == pytest.approx(-0.90, abs=0.005)
 
 
-def test_embedded_data_match_the_shared_tables():
+def test_embedded_data_match_the_published_tables():
     model = rozema2011()
-    rows = list(csv.DictReader((SHARED / "rozema2011_mean.csv").read_text().splitlines()))
-    assert model.names == tuple(r["name"] for r in rows)
-    assert np.array_equal(model.mean, [float(r["mean"]) for r in rows])
-    assert np.array_equal(model.sd, [float(r["sd"]) for r in rows])
-    shared = np.genfromtxt(SHARED / "rozema2011_cov.csv", delimiter=",", skip_header=1)[:, 1:]
-    assert np.array_equal(model.covariance, shared)
+    assert model.names == tuple(r[0] for r in PUBLISHED_MEAN_SD)
+    assert np.array_equal(model.mean, [r[1] for r in PUBLISHED_MEAN_SD])
+    assert np.array_equal(model.sd, [r[2] for r in PUBLISHED_MEAN_SD])
+    digest = hashlib.sha256(np.ascontiguousarray(model.covariance, dtype="<f8").tobytes()).hexdigest()
+    assert digest == COVARIANCE_SHA256
+    assert np.array_equal(model.covariance, model.covariance.T)
+    np.testing.assert_allclose(np.sqrt(np.diag(model.covariance)), model.sd, rtol=1e-5)
     assert "10.1167/iovs.10-6705" in model.citation
 
 

@@ -4,7 +4,8 @@
 - `biometry`: an EyeModel from biometry; `posterior`: posterior segment, fovea, rotation centres;
 - `rozema`: the Rozema 2011 model as data; `population`: eyes drawn from it (`sample`);
 - `published`: the 100 eyes of Fischer et al. 2023; `normative`: named normative eyes; `media`: indices;
-- `select`: eyes chosen by a short text spec (`published`, `sample:N`, `normative:NAME`).
+- `astigmatism`: power vectors <-> toric radii; `anatomy`: `full_anatomy` (astigmatism, decentration, stop, tilt);
+- `select`: eyes chosen by a short text spec (`published`, `published:full`, `sample:N[:astigmatic]`, `normative:NAME`).
 """
 
 from eyehil.emulator.eye.media import Media

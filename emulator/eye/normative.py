@@ -15,6 +15,18 @@
   need cornea = aqueous = lens = vitreous index, which EyeModel cannot say (media are per scene): use
   `normative_media("et_simul")` (1.376 throughout) to reproduce et_simul exactly. The lens (Navarro's radii) and
   AL 23.58 (SR 0) only fill fields et_simul does not have.
+- `"gka"`: gkaModelEye's default human eye (Aguirre 2019, Sci Rep 9:9360; `eye/species/+human/cornea.m`,
+  `iris.m`, `stop.m`), emmetropic (SR 0). Anterior cornea: the tri-axial ellipsoid of Navarro, Gonzalez &
+  Hernandez 2006 (JOSA A 23:219-232), semi-axes 14.26 (axial), 10.43 (horizontal), 10.27 (vertical) mm, i.e.
+  a biconic with R = b^2 / a, Q = b^2 / a^2 - 1: 7.6287 / -0.4650 in the horizontal meridian (axis 0 deg) and
+  7.3964 / -0.4813 in the vertical one. Posterior cornea: semi-axes 13.7716, 9.3027, 9.3027 (R 6.2840,
+  Q -0.5437). CCT 0.55. Both surfaces turned 2.5 deg nasally about the vertical axis about the anterior
+  ellipsoid's centre (apex 14.26 sin 2.5 deg = 0.622 mm nasal, 0.014 mm back); gkaModelEye turns the
+  posterior surface about its own centre, which puts its apex 3 um from ours. Stop: centred on the optic
+  axis at the anterior iris plane, 3.925 mm behind the apex, elliptical with gkaModelEye's eccentricity of
+  the stop radius (`anatomy.gka_stop`: 0.102 at 90 - 3/7*180 = 77.1 deg for the 4 mm default pupil). Its
+  accommodating lens is not representable: Atchison 2006's lens (as `"atchison"`, placed at the stop) and
+  AL 23.58, Atchison's media.
 - `"mean"`: the Rozema 2011 mean vector converted as in `population.py` (thick-lens index 1.4327), study-code
   media.
 
@@ -29,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from eyehil.emulator.eye.anatomy import gka_stop
 from eyehil.emulator.eye.biometry import eye_from_biometry
 from eyehil.emulator.eye.media import Media
 from eyehil.emulator.eye.model import EyeModel
@@ -67,8 +80,13 @@ _MEDIA: dict[str, Media] = {
     "atchison": Media(cornea=1.376, aqueous=1.3374, vitreous=1.336, label="atchison2006"),
     "et_simul": Media(cornea=1.376, aqueous=1.376, vitreous=1.376, label="et_simul"),
     "mean": Media.study_code(),
+    "gka": Media(cornea=1.376, aqueous=1.3374, vitreous=1.336, label="gkaModelEye-default"),
 }
-NORMATIVE_NAMES = ("navarro", "atchison", "et_simul", "mean")
+NORMATIVE_NAMES = ("navarro", "atchison", "et_simul", "mean", "gka")
+GKA_ANTERIOR_SEMI_AXES = (14.26, 10.43, 10.27)  # axial, horizontal, vertical (Navarro 2006 via gkaModelEye)
+GKA_POSTERIOR_SEMI_AXES = (13.7716, 9.3027, 9.3027)
+GKA_STOP_DEPTH = 3.925  # mm behind the apex: gkaModelEye's anterior iris plane (-4 + 0.15 / 2)
+GKA_CORNEA_TILT_DEG = 2.5  # nasal, about the vertical axis
 
 
 def normative_eye(name: str, laterality: str = "right", *, pupil_diameter: float | None = None) -> EyeModel:
@@ -76,13 +94,33 @@ def normative_eye(name: str, laterality: str = "right", *, pupil_diameter: float
     _check_name(name)
     if name == "mean":
         eye = eyes_from_raw(rozema2011().mean_draw(), "thick-lens", laterality)[0]
+    elif name == "gka":
+        eye = _gka_eye(laterality, DEFAULT_PUPIL_DIAMETER if pupil_diameter is None else float(pupil_diameter))
     else:
         eye = eye_from_biometry(**_SPECS[name], laterality=laterality)
     if name == "et_simul":
         eye = eye.replace(**_et_simul_fields())
-    if pupil_diameter is not None:
+    if pupil_diameter is not None and name != "gka":
         eye = eye.replace(pupil_radius=np.asarray(float(pupil_diameter) / 2.0))
     return eye
+
+
+def _gka_eye(laterality: str, pupil_diameter: float) -> EyeModel:
+    """gkaModelEye's default eye (module docstring)."""
+    a, bh, bv = GKA_ANTERIOR_SEMI_AXES
+    ap, bp, _ = GKA_POSTERIOR_SEMI_AXES
+    spec = dict(_SPECS["atchison"])
+    spec.update(anterior_radius=bh**2 / a, anterior_conic=bh**2 / a**2 - 1, posterior_radius=bp**2 / ap,
+                posterior_conic=bp**2 / ap**2 - 1, cct=0.55, acd=GKA_STOP_DEPTH - 0.55, pupil_diameter=pupil_diameter)
+    eye = eye_from_biometry(**spec, laterality=laterality)
+    tilt = np.radians(GKA_CORNEA_TILT_DEG)
+    eccentricity, axis = gka_stop(pupil_diameter / 2.0)
+    return eye.replace(
+        anterior_radius_perp=np.asarray(bv**2 / a), anterior_conic_perp=np.asarray(bv**2 / a**2 - 1),
+        cornea_tilt_deg=np.array([GKA_CORNEA_TILT_DEG, 0.0]),
+        cornea_offset=np.array([a * np.sin(tilt), 0.0, -a * (1.0 - np.cos(tilt))]),
+        pupil_eccentricity=np.asarray(eccentricity), pupil_axis_deg=np.asarray(axis),
+    )
 
 
 def normative_media(name: str) -> Media:

@@ -8,6 +8,13 @@ Conversion to an eye (the published study's code, Fischer et al. 2023; lengths i
 R_ac = 337.2 / K_ant_M, Q_ac = -ecc_ant^2, R_pc = (1337.2 - 1378) / K_post_M, Q_pc = -ecc_post^2, pupil radius
 = pupil_diameter_scotopic / 2, ACD from the posterior cornea to the anterior lens, R_lp stored as |R_lp|.
 
+Astigmatism (`astigmatism=True`; issue 13): the anterior and posterior power vectors (K_ant_J0, K_ant_J45,
+K_post_J0, K_post_J45), drawn jointly with everything else, become principal radii and axes (`astigmatism.py`:
+TABO angles of a right eye, J0 > 0 with the rule, R = 337.2 / K and -40.8 / K); R_ac and R_pc of the study
+stay the radii of the mean power (`EyeModel.anterior_mean_radius`). The same draws with and without
+astigmatism give the same eyes otherwise; without it (the default, the published study) the power vectors
+are drawn and discarded.
+
 Lens index: `"thick-lens"` (default, the paper's text) solves the thick-lens equation for n_L so that the lens
 has the sampled power (`thick_lens_index` in `rozema.py`); a float fixes the index (the study's code: 1.42).
 
@@ -23,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from eyehil.emulator.eye.astigmatism import ANTERIOR_DN, POSTERIOR_DN, principal_radii
 from eyehil.emulator.eye.biometry import eye_from_biometry
 from eyehil.emulator.eye.model import EyeModel
 from eyehil.emulator.eye.rozema import RawDraws, RozemaModel, rozema2011, thick_lens_index
@@ -36,6 +44,7 @@ __all__ = [
     "sample",
     "sample_raw",
     "study_parameters",
+    "with_power_vectors",
 ]
 
 LIMBUS_RADIUS = 5.9  # mm, EyeModel's default edge of the cornea
@@ -104,11 +113,13 @@ def sample(
     fovea_scaling: str = "study",
     centre_scaling: str = "study",
     model: RozemaModel | None = None,
+    astigmatism: bool = False,
 ) -> PopulationDraw:
     """Draw `n` valid eyes (a batch EyeModel, mm and degrees) from the Rozema 2011 population.
 
     Impossible draws are rejected and redrawn until `n` are accepted; see `PopulationDraw.rejections`.
-    `model` replaces the published population (e.g. `rozema2011().with_mean(...)` for tests).
+    `model` replaces the published population (e.g. `rozema2011().with_mean(...)` for tests); `astigmatism`
+    keeps the drawn corneal power vectors as toric corneas (module docstring).
     """
     _check_n(n)
     _check_lens_index(lens_index)
@@ -118,22 +129,27 @@ def sample(
         if attempts > 1000 * n + 100_000:
             raise RuntimeError(f"sample: gave up after {attempts} draws; rejections {_as_dict(counts)}")
         raw = model.draw(need + need // 10 + 16, rng)
-        codes = rejection_codes(raw, lens_index)
+        codes = rejection_codes(raw, lens_index, astigmatism=astigmatism)
         stop = int(np.searchsorted(np.cumsum(codes == 0), need)) + 1  # up to the need-th acceptance
         codes, raw = codes[:stop], raw[:stop]
         counts += np.bincount(codes, minlength=counts.size)
         attempts += codes.size
         kept.append(raw[codes == 0])
     raw = RawDraws(np.concatenate([k.values for k in kept]), model.names)
-    eyes = eyes_from_raw(raw, lens_index, laterality, fovea_scaling, centre_scaling)
+    eyes = eyes_from_raw(raw, lens_index, laterality, fovea_scaling, centre_scaling, astigmatism=astigmatism)
     return PopulationDraw(eyes=eyes, raw=raw, rejections=_as_dict(counts), attempts=attempts)
 
 
-def rejection_codes(raw: RawDraws, lens_index: str | float = "thick-lens") -> np.ndarray:
-    """Per draw: 0 if it is a valid eye, else 1 + the index in `REJECTION_REASONS` of its first failing reason."""
+def rejection_codes(raw: RawDraws, lens_index: str | float = "thick-lens", *, astigmatism: bool = False) -> np.ndarray:
+    """Per draw: 0 if it is a valid eye, else 1 + the index in `REJECTION_REASONS` of its first failing reason.
+
+    With `astigmatism` a principal power of a cornea must keep its sign too (a non-positive radius otherwise)."""
     _check_lens_index(lens_index)
     lengths = ("R_lens_ant", "lens_thickness", "CCT", "ACD", "axial_length", "pupil_diameter_scotopic", "K_ant_M")
     non_positive = np.any([raw[k] <= 0 for k in lengths], axis=0) | (raw["K_post_M"] >= 0) | (raw["R_lens_post"] >= 0)
+    if astigmatism:
+        non_positive |= raw["K_ant_M"] - np.hypot(raw["K_ant_J0"], raw["K_ant_J45"]) <= 0
+        non_positive |= raw["K_post_M"] + np.hypot(raw["K_post_J0"], raw["K_post_J45"]) >= 0
     vitreous = raw["axial_length"] - raw["CCT"] - raw["ACD"] - raw["lens_thickness"]
     fails = [
         np.abs(raw["ecc_ant"]) >= 1,
@@ -154,10 +170,13 @@ def eyes_from_raw(
     laterality: str = "right",
     fovea_scaling: str = "study",
     centre_scaling: str = "study",
+    *,
+    astigmatism: bool = False,
 ) -> EyeModel:
-    """Convert raw draws (all valid: see `rejection_codes`) to a batch EyeModel with the study's conventions."""
+    """Convert raw draws (all valid: see `rejection_codes`) to a batch EyeModel with the study's conventions;
+    `astigmatism` makes the corneas toric from the drawn power vectors (module docstring)."""
     _check_lens_index(lens_index)
-    return eye_from_biometry(
+    eyes = eye_from_biometry(
         anterior_radius=337.2 / raw["K_ant_M"],
         anterior_conic=-raw["ecc_ant"] ** 2,
         posterior_radius=(1337.2 - 1378.0) / raw["K_post_M"],
@@ -174,14 +193,27 @@ def eyes_from_raw(
         fovea_scaling=fovea_scaling,
         centre_scaling=centre_scaling,
     )
+    return with_power_vectors(eyes, raw["K_ant_J0"], raw["K_ant_J45"], raw["K_post_J0"], raw["K_post_J45"]) \
+        if astigmatism else eyes
+
+
+def with_power_vectors(eyes: EyeModel, ant_j0, ant_j45, post_j0, post_j45) -> EyeModel:
+    """`eyes` with toric corneas of the given power vectors (D, right-eye convention) about their mean powers
+    (the radii of the mean power stay `anterior_mean_radius` / `posterior_mean_radius`)."""
+    ant = principal_radii(1000.0 * ANTERIOR_DN / eyes.anterior_mean_radius, ant_j0, ant_j45, ANTERIOR_DN)
+    post = principal_radii(1000.0 * POSTERIOR_DN / eyes.posterior_mean_radius, post_j0, post_j45, POSTERIOR_DN)
+    return eyes.replace(
+        anterior_radius=ant[0], anterior_radius_perp=ant[1], anterior_axis_deg=ant[2],
+        posterior_radius=post[0], posterior_radius_perp=post[1], posterior_axis_deg=post[2],
+    )
 
 
 def study_parameters(eyes: EyeModel) -> dict[str, np.ndarray]:
     """The 11 per-eye parameters of the sensitivity analysis, keyed by `STUDY_KEYS` (mm; ACD from the
-    posterior cornea; R_lens_post as a magnitude; pupil diameter, not radius)."""
+    posterior cornea; R_lens_post as a magnitude; pupil diameter, not radius; corneal radii of the mean power)."""
     e = eyes.as_batch()
     values = (
-        e.anterior_radius, e.anterior_conic, e.posterior_radius, e.posterior_conic, e.lens_anterior_radius,
+        e.anterior_mean_radius, e.anterior_conic, e.posterior_mean_radius, e.posterior_conic, e.lens_anterior_radius,
         e.lens_posterior_radius, e.cct, e.acd, e.lens_thickness, e.axial_length, 2.0 * e.pupil_radius,
     )
     return {k: np.array(v) for k, v in zip(STUDY_KEYS, values, strict=True)}

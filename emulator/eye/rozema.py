@@ -80,6 +80,19 @@ class RozemaModel:
         z = rng.standard_normal((n, self.mean.size))
         return RawDraws(self.mean + z @ factor.T, self.names)
 
+    def conditional(self, observed: dict[str, np.ndarray], names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+        """Mean (n, k) and covariance (k, k) of the parameters `names` given `observed` {name: values (n,)}
+        under this normal: mu_a + S_ao S_oo^-1 (x_o - mu_o), S_aa - S_ao S_oo^-1 S_oa."""
+        obs = [self.index(name) for name in observed]
+        want = [self.index(name) for name in names]
+        s_oo = self.covariance[np.ix_(obs, obs)]
+        s_ao = self.covariance[np.ix_(want, obs)]
+        gain = np.linalg.solve(s_oo, s_ao.T)  # (o, k)
+        deviation = np.column_stack([np.asarray(v, dtype=float) for v in observed.values()]) - self.mean[obs]
+        mean = self.mean[want] + deviation @ gain
+        cov = self.covariance[np.ix_(want, want)] - s_ao @ gain
+        return mean, 0.5 * (cov + cov.T)
+
     def mean_draw(self) -> RawDraws:
         """The mean vector as a single draw (a batch of one)."""
         return RawDraws(self.mean[None, :].copy(), self.names)

@@ -65,6 +65,19 @@ class Conic:
         w, valid = self.sag(np.sum(xy**2, axis=-1))
         return np.concatenate([xy, (self.apex - w)[..., None]], axis=-1), valid
 
+    def point_normal(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`point(q)` and `normal` there: (point (..., 3), unit normal (..., 3), valid)."""
+        p, valid = self.point(q)
+        return p, self.normal(p), valid
+
+    def coords(self, p: np.ndarray) -> np.ndarray:
+        """The surface coordinates (x, y) (..., 2) of points p (..., 3): the argument of `point`."""
+        return p[..., :2]
+
+    def osculating_sphere(self) -> tuple[np.ndarray, np.ndarray]:
+        """(centre (..., 3), radius (...)) of the sphere of the vertex curvature touching the apex."""
+        return np.stack(np.broadcast_arrays(0.0, 0.0, self.apex - self.radius), axis=-1), self.radius
+
     def normal(self, p: np.ndarray) -> np.ndarray:
         """Unit normal (..., 3) at surface points p; +z at the apex when R > 0."""
         w = self.apex - p[..., 2]

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from eyehil.emulator.optics.biconic import Biconic
 from eyehil.emulator.optics.conic import Conic, Plane
 from eyehil.emulator.optics.newton import newton2d
 from eyehil.emulator.optics.rays import _dot, refract, unit
@@ -33,8 +34,8 @@ PUPIL_TOLERANCE_MM = 1e-6
 class CorneaOptics:
     """The cornea and pupil plane of one eye or a batch (eye-local frame, mm) and the indices."""
 
-    anterior: Conic
-    posterior: Conic
+    anterior: Conic | Biconic
+    posterior: Conic | Biconic
     pupil_plane: Plane
     n_air: np.ndarray
     n_cornea: np.ndarray
@@ -56,9 +57,8 @@ def trace_into_eye(
     """Where a ray entering the anterior cornea at the point above q (..., 2) meets the pupil plane.
 
     The ray comes from the point `source` (..., 3) or travels along the unit `direction` (..., 3)."""
-    a, ok = optics.anterior.point(q)
+    a, na, ok = optics.anterior.point_normal(q)
     d0 = unit(a - source) if direction is None else direction
-    na = optics.anterior.normal(a)
     ok &= _dot(na, d0) < 0
     d1, ok1 = refract(d0, na, optics.n_air, optics.n_cornea)
     t1, ok2 = optics.posterior.intersect(a, d1)
@@ -89,16 +89,35 @@ def _first_guess(optics: CorneaOptics, camera: np.ndarray, target: np.ndarray) -
     direction = unit(image - camera)
     t, ok = optics.anterior.intersect(camera, direction)
     hit = camera + np.nan_to_num(t)[..., None] * direction
-    return np.where(ok[..., None], hit[..., :2], image[..., :2])
+    return np.where(ok[..., None], optics.anterior.coords(hit), optics.anterior.coords(image))
 
 
-def pupil_boundary(centre_xy: np.ndarray, radius: np.ndarray, depth: np.ndarray, n_points: int = 30) -> np.ndarray:
-    """`n_points` evenly spaced points (..., N, 3) on a circle of `radius` about centre_xy (..., 2) at z = depth."""
+def pupil_boundary(
+    centre_xy: np.ndarray,
+    radius: np.ndarray,
+    depth: np.ndarray,
+    n_points: int = 30,
+    *,
+    eccentricity: np.ndarray | None = None,
+    axis_deg: np.ndarray | None = None,
+) -> np.ndarray:
+    """`n_points` evenly spaced points (..., N, 3) on a circle of `radius` about centre_xy (..., 2) at z = depth.
+
+    With `eccentricity` e (...) the stop is an ellipse of the same area (gkaModelEye's convention): semi-axes
+    a = r (1 - e^2)^(-1/4) along `axis_deg` (from +x toward +y, eye-local frame) and b = r (1 - e^2)^(1/4);
+    the points are at the ellipse's parametric angles 2 pi k / N."""
     if n_points < 5:
         raise ValueError("the pupil boundary needs at least 5 points for an ellipse fit")
     theta = 2.0 * np.pi * np.arange(n_points) / n_points
     r = np.asarray(radius)[..., None]
-    x = centre_xy[..., 0:1] + r * np.cos(theta)
-    y = centre_xy[..., 1:2] + r * np.sin(theta)
+    if eccentricity is None:
+        x = centre_xy[..., 0:1] + r * np.cos(theta)
+        y = centre_xy[..., 1:2] + r * np.sin(theta)
+    else:
+        squeeze = (1.0 - np.asarray(eccentricity, dtype=float) ** 2)[..., None] ** 0.25
+        phi = np.radians(np.zeros_like(squeeze) if axis_deg is None else np.asarray(axis_deg)[..., None])
+        major, minor = r / squeeze * np.cos(theta), r * squeeze * np.sin(theta)
+        x = centre_xy[..., 0:1] + major * np.cos(phi) - minor * np.sin(phi)
+        y = centre_xy[..., 1:2] + major * np.sin(phi) + minor * np.cos(phi)
     z = np.broadcast_to(np.asarray(depth)[..., None], x.shape)
     return np.stack([x, y, z], axis=-1)
