@@ -1,7 +1,9 @@
 """`eyehil study fischer2023`: the replication of Fischer, van der Merwe & Vandenheever 2023, end to end.
 
 Ray-traces the eyes through both published experiments, calibrates the host estimators, runs the
-statistics and writes summary.json, per_eye.csv, report.md and figures into --out.
+statistics and writes summary.json, per_eye.csv, report.md and figures into --out. With --anatomy full the
+same eyes run a second time with the anatomy the paper left out (`eyehil.emulator.eye.anatomy.full_anatomy`,
+drawn with --seed) and the report compares the two per error category.
 """
 
 from __future__ import annotations
@@ -31,6 +33,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--head-positions", default="study-code", choices=("study-code", "paper-text"),
                    help="Guestrin head positions: study-code (+-30 mm vertical, +-40 mm horizontal; default) or "
                         "paper-text (30 mm left/right, 40 mm forward/back)")
+    p.add_argument("--anatomy", default="paper", choices=("paper", "full"),
+                   help="paper (default): the published eyes' anatomy; full: also run the same eyes with "
+                        "astigmatism, pupil decentration, elliptical stop and cornea tilt (drawn with --seed) and "
+                        "report how each error category changes")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -41,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     from eyehil.analysis.study.findings import all_findings
     from eyehil.analysis.study.replication import run_study
     from eyehil.analysis.study.report import write_outputs
-    from eyehil.analysis.study.summary import summarise_study
+    from eyehil.analysis.study.summary import anatomy_summary, summarise_study
     from eyehil.emulator.eye.select import eyes_from_spec
 
     if args.workers is not None and args.workers < 1:
@@ -54,12 +60,19 @@ def run(args: argparse.Namespace) -> int:
         result = run_study(eyes, profile=args.profile, compare=None if args.compare == "none" else args.compare,
                            head_positions=args.head_positions, workers=args.workers, scheduler=args.scheduler,
                            progress=bar.update)
-    result.settings.update({"eyes": about, "seed": args.seed if args.eyes != "published" else None})
+    result.settings.update({"eyes": about, "seed": args.seed if args.eyes != "published" else None,
+                            "anatomy": args.anatomy})
     summary = summarise_study(result)
-    written = write_outputs(result, summary, Path(args.out))
+    full = None
+    if args.anatomy == "full":
+        full = _full_anatomy_run(eyes, args)
+        result.settings["anatomy_seed"] = args.seed
+        summary["anatomy"] = anatomy_summary(result, full)
+    written = write_outputs(result, summary, Path(args.out), full)
     findings = all_findings(summary)
     held = sum(f.holds for f in findings)
-    print(f"{args.name}: {len(eyes)} eyes ({about}) in {time.perf_counter() - start:.1f} s")
+    both = ", paper and full anatomy" if full is not None else ""
+    print(f"{args.name}: {len(eyes)} eyes ({about}{both}) in {time.perf_counter() - start:.1f} s")
     g = summary["guestrin"]
     print(f"  Guestrin ({g['profile']}) H1 {g['H1']['mean']:.3f} +- {g['H1']['sd']:.3f} deg, H2 "
           f"{g['H2']['mean']:.3f} +- {g['H2']['sd']:.3f} deg (published 0.36 +- 0.20)")
@@ -69,9 +82,27 @@ def run(args: argparse.Namespace) -> int:
               f"{c['H2']['mean']:.3f} +- {c['H2']['sd']:.3f} deg")
     best = summary["blignaut"]["best_function"]
     print("  Blignaut best function: " + ", ".join(f"{c} model {v['model']} {v['mean']:.3f}" for c, v in best.items()))
+    for col, r in summary.get("anatomy", {}).items():
+        print(f"  {col}: paper {r['paper']['mean']:.3f} +- {r['paper']['sd']:.3f}, full {r['full']['mean']:.3f} +- "
+              f"{r['full']['sd']:.3f} deg; significant (full): {', '.join(r['full']['significant']) or 'none'}")
     print(f"  published findings reproduced: {held} of {len(findings)} (see report.md)")
     for f in findings:
         if not f.holds:
             print(f"    departs: {f.claim}: {f.replicated}")
     print(f"  written: {', '.join(str(p) for p in written)}")
     return 0
+
+
+def _full_anatomy_run(eyes, args: argparse.Namespace):
+    """The same eyes with `full_anatomy` (drawn with --seed), through the same study settings."""
+    import numpy as np
+    from tqdm import tqdm
+
+    from eyehil.analysis.study.replication import run_study
+    from eyehil.emulator.eye.anatomy import full_anatomy
+
+    full_eyes = full_anatomy(eyes, np.random.default_rng(args.seed))
+    with tqdm(total=len(eyes), unit="eye", desc="study, full anatomy", disable=args.quiet) as bar:
+        return run_study(full_eyes, profile=args.profile, compare=None if args.compare == "none" else args.compare,
+                         head_positions=args.head_positions, workers=args.workers, scheduler=args.scheduler,
+                         progress=bar.update)

@@ -157,3 +157,36 @@ def profiles(h1: dict[str, np.ndarray], q_ac: np.ndarray, sens: dict[str, dict[s
     bx.legend(fontsize=8)
     fig.suptitle("Guestrin: how much of the error is the estimator's")
     return _save(fig, path)
+
+
+def anatomy(X: np.ndarray, names: list[str], h1: dict[str, np.ndarray], significant: list[str], path: Path,
+            column: str) -> Path:
+    """Fig. 9 (beyond the paper): partial regression of H1 on each significant parameter of the full-anatomy run.
+
+    h1: {"paper": per-eye H1, "full": per-eye H1} (deg) of the same eyes; X: the full run's study parameters
+    (eyes, 11); significant: the full run's significant parameters (strongest first). Each panel plots the
+    partial residuals of H1 against one parameter (z-scored), controlling for the other significant ones.
+    """
+    Z = zscore_columns(X)
+    shown = significant or names[:1]
+    ncols = min(3, len(shown))
+    nrows = -(-len(shown) // ncols)
+    fig, axes = _figure(nrows, ncols, (max(4.0 * ncols, 6.5), 3.4 * nrows + 0.6))
+    keep = [names.index(n) for n in shown]
+    for j, (ax, name) in enumerate(zip(axes.ravel(), shown, strict=False)):
+        for label, y in h1.items():
+            ok = np.isfinite(y)
+            design = np.column_stack([np.ones(int(ok.sum())), Z[ok][:, keep]])
+            pr = partial_regression(design, y[ok], j + 1)
+            xs = np.linspace(pr.x.min(), pr.x.max(), 2)
+            line = ax.plot(pr.x, pr.y, ".", alpha=0.6, label=f"{label} anatomy: {pr.slope:+.3f} deg/SD")[0]
+            ax.plot(xs, pr.slope * xs, "-", color=line.get_color())
+        ax.set_title(name if significant else f"{name} (nothing significant)", fontsize=9)
+        ax.set_xlabel(f"{name} (z, partial)")
+        ax.set_ylabel(f"{column} (deg, partial)")
+        ax.legend(fontsize=7)
+    for ax in axes.ravel()[len(shown):]:
+        ax.axis("off")
+    fig.suptitle(f"Paper vs full anatomy, the same eyes: partial regression of {column}\n"
+                 "on each significant parameter of the full-anatomy run", fontsize=10)
+    return _save(fig, path)

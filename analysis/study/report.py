@@ -19,13 +19,17 @@ from eyehil.emulator.forward import simulate
 from eyehil.emulator.scene import load_scene
 
 
-def write_outputs(result: StudyResult, summary: dict[str, Any], out: Path) -> list[Path]:
-    """Everything a run produces, in `out` (created)."""
+def write_outputs(result: StudyResult, summary: dict[str, Any], out: Path,
+                  full: StudyResult | None = None) -> list[Path]:
+    """Everything a run produces, in `out` (created); `full`: the same eyes with full anatomy (`--anatomy full`,
+    compared in `summary["anatomy"]` and fig. 9)."""
     out.mkdir(parents=True, exist_ok=True)
     written = [out / "summary.json", out / "per_eye.csv"]
     (out / "summary.json").write_text(json.dumps(summary, indent=1, default=_json) + "\n", encoding="utf-8")
     _per_eye_csv(result, out / "per_eye.csv")
     written += _figures(result, summary, out)
+    if full is not None:
+        written.append(_anatomy_figure(result, full, summary, out / "fig9_anatomy.png"))
     (out / "report.md").write_text(render_markdown(summary, [p.name for p in written if p.suffix == ".png"]),
                                    encoding="utf-8")
     return [*written, out / "report.md"]
@@ -81,6 +85,16 @@ def _profiles_figure(result: StudyResult, summary: dict[str, Any], out: Path) ->
     return [figures.profiles(h1, result.eyes.anterior_conic, sens, out / "fig8_estimator_profiles.png")]
 
 
+def _anatomy_figure(paper: StudyResult, full: StudyResult, summary: dict[str, Any], path: Path) -> Path:
+    """Fig. 9: H1 of the main profile, paper vs full anatomy, on the full run's significant parameters."""
+    column = f"H1 {summary['guestrin']['profile']}"
+    params = study_parameters(full.eyes)
+    names = list(params)
+    X = np.column_stack([params[k] for k in names])
+    return figures.anatomy(X, names, {"paper": paper.h1, "full": full.h1},
+                           summary["anatomy"][column]["full"]["significant"], path, column)
+
+
 def _features_figure(result: StudyResult, path: Path) -> Path:
     """Fig. 3 for the two eyes of most and least negative Q_ac (right eye, Blignaut scene)."""
     q = result.eyes.anterior_conic
@@ -127,6 +141,7 @@ def render_markdown(s: dict[str, Any], pngs: list[str]) -> str:
                           f"{pub[k]['mean']} +- {pub[k]['sd']}",
                           f"{g['real'][k]['mean']:.3f} +- {g['real'][k]['sd']:.3f}"))
     lines += _profiles_section(s)
+    lines += _anatomy_section(s)
     lines += _blignaut_tables(s)
     lines += _sensitivity_table(s)
     lines += _univariate_table(s)
@@ -211,6 +226,25 @@ def _profiles_section(s: dict[str, Any]) -> list[str]:
     lines += ["", f"The {c['profile']} estimator's H1 is {ratio:.2f}x the {g['profile']} one's: "
               f"{100 * (1 - ratio):.0f}% of the replicated published-level error comes from the estimator, not "
               "from the eyes or the optics."]
+    return lines
+
+
+def _anatomy_section(s: dict[str, Any]) -> list[str]:
+    a = s.get("anatomy")
+    if not a:
+        return []
+    lines = ["", "## Paper vs full anatomy (the same eyes)", "",
+             "A finding beyond the paper: the same eyes, seed and scenes with the anatomy the study left out "
+             "(`eyehil.emulator.eye.anatomy.full_anatomy`: astigmatism drawn conditionally on each eye's parameters, "
+             "pupil decentration, elliptical stop, cornea tilt). Errors in degrees; significant parameters of the "
+             "multivariate regression (p < .05, strongest first).", "",
+             _row("error", "paper mean +- SD", "full mean +- SD", "change of mean / SD", "significant (paper)",
+                  "significant (full)"), _row(*["---"] * 6)]
+    for col, r in a.items():
+        p, f = r["paper"], r["full"]
+        lines.append(_row(col, f"{p['mean']:.3f} +- {p['sd']:.3f}", f"{f['mean']:.3f} +- {f['sd']:.3f}",
+                          f"{f['mean'] - p['mean']:+.3f} / {f['sd'] - p['sd']:+.3f}",
+                          ", ".join(p["significant"]) or "none", ", ".join(f["significant"]) or "none"))
     return lines
 
 

@@ -8,7 +8,9 @@ coef}, r_squared, univariate: {parameter: {coef, p, r_squared}}, significant_uni
 coefficients in degrees per SD of the z-scored parameter (the full fit on all 11 parameters, the paper's
 text; `r_squared` is that of the refit on the significant ones, as the paper reports; `univariate` the
 one-parameter fits the study's code ran); `guestrin_compare` {profile, H1, H2: {mean, sd, skewness},
-sensitivity: {H1, H2: as above}} for the comparison profile on the same features (None without one).
+sensitivity: {H1, H2: as above}} for the comparison profile on the same features (None without one);
+`anatomy` (only with `--anatomy full`, `anatomy_summary`) {category: {paper, full: {mean, sd, significant}}} for
+the Guestrin H1/H2 of each profile and the Blignaut best-function errors, the same eyes with paper and full anatomy.
 """
 
 from __future__ import annotations
@@ -125,6 +127,25 @@ def compare_summary(result: StudyResult) -> dict[str, Any] | None:
         s = stats.summarise(values[np.isfinite(values)])
         out[key] = {"mean": s.mean, "sd": s.sd, "skewness": s.skewness, "n": s.n}
     out["sensitivity"] = sensitivity_summary(result, {"H1": run["h1"], "H2": run["h2"]})
+    return out
+
+
+def anatomy_columns(result: StudyResult) -> dict[str, np.ndarray]:
+    """The error categories compared between anatomies: H1/H2 of every profile, then the Blignaut best functions."""
+    cols = {f"{k} {name}": run[k.lower()] for name, run in result.profiles.items() for k in ("H1", "H2")}
+    return cols | best_function_errors(result.blignaut_errors)
+
+
+def anatomy_summary(paper: StudyResult, full: StudyResult) -> dict[str, Any]:
+    """Per error category: mean, SD and the significant parameters (multivariate, strongest first) of the same
+    eyes with the paper's anatomy and with `eyehil.emulator.eye.anatomy.full_anatomy`."""
+    out: dict[str, Any] = {}
+    for name, result in (("paper", paper), ("full", full)):
+        columns = anatomy_columns(result)
+        sens = sensitivity_summary(result, columns)
+        for col, y in columns.items():
+            s = stats.summarise(y[np.isfinite(y)])
+            out.setdefault(col, {})[name] = {"mean": s.mean, "sd": s.sd, "significant": sens[col]["significant"]}
     return out
 
 
