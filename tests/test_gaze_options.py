@@ -3,8 +3,6 @@ aspheric one (they differ in the documented direction)."""
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
 from spherical_eye import RIGHT_APEX, SphericalEye, guestrin_geometry, simulate
@@ -53,7 +51,7 @@ def aspheric():
     eye = published_eyes()[3:4]
     out = {}
     for q in (0.0, -0.45):
-        e = replace(eye, anterior_conic=np.full(1, q))
+        e = eye.replace(anterior_conic=np.full(1, q))  # a conic of revolution: its _perp twin follows
         f = ray_trace(e, scene)
         s = eye_samples(f, "right")
         out[q] = EyeSamples(s.pupil_px[0, 0], s.glints_px[0, 0], s.valid[0, 0])
