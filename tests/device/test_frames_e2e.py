@@ -115,7 +115,9 @@ def test_frames_are_the_device_render_and_detect_to_the_truth(backend: str, scen
 @pytest.mark.parametrize("scene_name, method", [("guestrin2006", "guestrin"), ("blignaut2014", "blignaut")])
 def test_frames_only_calibration_matches_exact_features(tmp_path, backend: str, scene_name: str, method: str) -> None:
     geometry = load_geometry(write_geometry(load_scene(scene_name), tmp_path / "geometry.toml")).geometry
-    plan = Plan.default(geometry.screen, settle_s=0.4, collect_s=0.1)
+    # 15 exposures per target: on the fast clock an image the link cannot take yet is dropped (counted), and how
+    # many are depends on how busy the machine is; the accuracy asserted below does not
+    plan = Plan.default(geometry.screen, settle_s=0.4, collect_s=0.3)
     url, close = start_emulator(backend, scene=scene_name, eyes=EYES, eye=EYE, rate=50)
     try:
         with open_tracker(url) as tracker:
@@ -123,7 +125,7 @@ def test_frames_only_calibration_matches_exact_features(tmp_path, backend: str, 
             assert tracker.stats.samples == 0 and tracker.stats.images > 0  # frames only: no FEATURES came
     finally:
         close()
-    assert all(len(f) >= 3 for f in result.fixations)  # 5 exposures per target at 50 Hz, some may be dropped
+    assert all(len(f) >= 3 for f in result.fixations)  # 15 exposures per target at 50 Hz, some may be dropped
     offline = _offline(scene_name, method, plan, quantise=False)
     difference = np.abs(result.errors_deg - offline)
     message = (f"{method} over {backend}: validation errors from frames {np.round(result.errors_deg, 3)} deg, from "
