@@ -18,9 +18,13 @@ call (one batched calibration for every effect's points). Per effect, with P = 1
 Ranking (`EffectFit.score`): D at the estimate plus 2 per fitted parameter (AIC-like, D read as -2 log
 likelihood up to a constant). An effect is worth adding only if it lowers D by more than the 95 % point of
 chi-square(k) (`EffectFit.passes`), after dividing by the squared scale factor s^2 = max(1, D / (n - k))
-(n conditions): when the model with the effect still misfits far beyond sampling, D's scale is inflated
+(n terms of D): when the model with the effect still misfits far beyond sampling, D's scale is inflated
 and so is every drop of D (the scale factor of least squares with an unknown variance; the Particle Data
-Group's practice). The reported 1-sigma uncertainties are multiplied by s.
+Group's practice); and only if no fitted parameter ends within `EDGE` (a fraction of its range) of a
+bound of its plausible range (`EffectFit.at_edge`): a fit that wants to leave the plausible range is
+evidence against the effect, not a measurement of it. The reported 1-sigma uncertainties are multiplied
+by s; `EffectFit.ci95` is 1.96 of them. `EffectFit.gof_p` is the goodness of fit of the model with the
+effect: P(chi-square(n - k) >= D).
 """
 
 from __future__ import annotations
@@ -36,11 +40,13 @@ from emulator.effects import Applied, Effect
 
 COARSE = {1: 9, 2: 3}
 REFINE = 3
+EDGE = 0.01
 
 
 @dataclass(frozen=True, eq=False)
 class EffectFit:
-    """The fitted effect: every parameter's value, 1-sigma of the fitted ones, D before (D0) and at the fit."""
+    """The fitted effect: every parameter's value, 1-sigma of the fitted ones, D before (D0) and at the fit;
+    `n_conditions` is the number of terms of D."""
 
     effect: Effect
     values: dict[str, float]
@@ -76,9 +82,35 @@ class EffectFit:
         dof = self.n_conditions - self.k
         return float(np.sqrt(max(1.0, self.D / dof))) if dof > 0 else 1.0
 
-    def passes(self, level: float = 0.95) -> bool:
+    @property
+    def at_edge(self) -> list[str]:
+        """Fitted parameters within `EDGE` of their range's ends (the neutral end excepted: that is "no
+        effect", which the drop criterion already refuses)."""
+        out = []
+        for p in self.effect.fitted:
+            v, margin = self.values[p.name], EDGE * (p.high - p.low)
+            if (v <= p.low + margin and p.low != p.neutral) or (v >= p.high - margin and p.high != p.neutral):
+                out.append(p.name)
+        return out
+
+    @property
+    def ci95(self) -> dict[str, float]:
+        """Half-widths of the 95 % intervals of the fitted parameters (1.96 sigma; NaN if unknown)."""
+        return {k: 1.96 * s for k, s in self.sigma.items()}
+
+    @property
+    def gof_p(self) -> float:
+        """P(chi-square(n - k) >= D): the goodness of fit with this effect (1 with no dof left)."""
+        dof = self.n_conditions - self.k
+        return float(sps.chi2.sf(self.D, dof)) if dof > 0 else 1.0
+
+    def lowers(self, level: float = 0.95) -> bool:
         """(D0 - D) / scale^2 above the `level` point of chi-square(k)."""
         return self.reduction / self.scale**2 > float(sps.chi2.ppf(level, self.k))
+
+    def passes(self, level: float = 0.95) -> bool:
+        """Lowers D enough (`lowers`) and no fitted parameter is at its range's edge."""
+        return self.lowers(level) and not self.at_edge
 
     @property
     def applied(self) -> Applied:
