@@ -6,8 +6,10 @@ add them to the model, and show the gap shrink, or say that no known effect expl
    Holm adjusted; gap measure D = sum of squared normal scores of the mean and spread terms). No
    significant gap: stop.
 2. name (`name_effects`): every effect of the catalogue (`emulator.effects`) that can act in this
-   experiment and is not in the model yet is fitted to minimise D (`analysis.discrepancy_search`) and
-   ranked by D + 2k (k fitted parameters).
+   experiment and is not in the model yet is fitted to minimise D (`analysis.discrepancy_search`: a
+   screen of all, refinement of the best few) and ranked by D + 2k (k fitted parameters). Rounds after
+   the first consider only the effects that lowered D significantly in round 1 (at most
+   `LATER_CANDIDATES`): an effect that explains nothing alone is not tried as a second effect.
 3. add: the top-ranked effect joins the model at its fitted values if it lowers D by more than the
    chi-square(k) 95 % point (after the misfit scale factor) and no fitted parameter is at the edge of its
    plausible range (`EffectFit.passes`). Otherwise nothing is added and the round says why.
@@ -43,13 +45,20 @@ import numpy as np
 
 from analysis.discrepancy_data import Measured, MeasuredCondition
 from analysis.discrepancy_metrics import Evaluator
-from analysis.discrepancy_search import EffectFit, max_evaluations, search_effects
+from analysis.discrepancy_search import TOP, EffectFit, max_evaluations, search_effects
 from analysis.discrepancy_stats import Comparison, compare
 from emulator import effects as registry
 from emulator.effects import Applied, Effect
 from emulator.eye.model import EyeModel
 
 ALPHA_GOF = 0.01
+LATER_CANDIDATES = 8
+
+
+def _evaluations(chosen: Sequence[Effect]) -> int:
+    """Evaluations of a round at most: every effect's screen, the `TOP` largest refinements."""
+    refine = sorted((max_evaluations(e) - max_evaluations(e, refined=False) for e in chosen), reverse=True)
+    return sum(max_evaluations(e, refined=False) for e in chosen) + sum(refine[:TOP])
 OUTCOMES = ("no gap", "explained", "none explains")
 
 
@@ -88,6 +97,7 @@ class Interaction:
     D0: float
     alone: dict[str, float]
     together: float
+    comparisons: dict[str, Comparison] = field(default_factory=dict)  # each alone, and "together"
 
     @property
     def interaction(self) -> float:
@@ -162,14 +172,12 @@ def name_effects(evaluator: Evaluator, measured: Measured, before: Comparison, e
     """Step 2: every candidate effect fitted (batched together), ranked by D + 2k (best first)."""
     progress = progress or Silent()
 
-    def gap(batch: list[Applied]) -> np.ndarray:
-        metrics = evaluator.evaluate([[a] for a in batch])
-        progress.advance(len(batch))
-        return np.array([compare(m, measured, evaluator.experiment.reference, alpha, tests=False).D
-                         for m in metrics])
+    def score(metrics) -> float:
+        return compare(metrics, measured, evaluator.experiment.reference, alpha, tests=False).D
 
-    fits = search_effects(candidates(evaluator, effect_names), gap, before.D, before.n_terms)
-    return sorted(fits, key=lambda f: f.score)
+    fits = search_effects(candidates(evaluator, effect_names), lambda batch: evaluator.evaluate([[a] for a in batch]),
+                          score, before.D, before.n_terms, progress=progress.advance)
+    return sorted(fits, key=lambda f: (f.screened, f.score))
 
 
 def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel | None = None,
@@ -184,11 +192,13 @@ def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel
                                      seed=seed, pool=pool, workers=workers)
         progress.advance(1)
         done, added, fits = [], [], []
+        names = list(effect_names or registry.names())
         for i in range(rounds):
-            names = [e.name for e in candidates(search, effect_names)]
-            progress.stage(f"round {i + 1}: fitting {len(names)} effects",
-                           sum(max_evaluations(registry.get(n)) for n in names))
-            current = _round(search, measured, effect_names, alpha, progress)
+            if i == 1:  # later rounds: the effects that lowered D in round 1
+                names = [f.effect.name for f in done[0].fits if f.lowers()][:LATER_CANDIDATES]
+            chosen = candidates(search, names)
+            progress.stage(f"round {i + 1}: fitting {len(chosen)} effects", _evaluations(chosen))
+            current = _round(search, measured, names, alpha, progress)
             done.append(current)
             if current.added is None:
                 break
@@ -202,10 +212,11 @@ def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel
         if len(added) > 1:
             progress.stage("interactions of the added effects", 1)
             points = [[a] for a in added] + [list(added)]
-            Ds = [compare(m, measured, initial.experiment.reference, alpha, tests=False).D
-                  for m in initial.evaluate(points)]
-            interactions = Interaction(done[0].before.D, {a.effect.name: d for a, d in zip(added, Ds, strict=False)},
-                                       Ds[-1])
+            comps = [compare(m, measured, initial.experiment.reference, alpha, tests=False)
+                     for m in initial.evaluate(points)]
+            labels = [a.effect.name for a in added] + ["together"]
+            alone = {a.effect.name: c.D for a, c in zip(added, comps, strict=False)}
+            interactions = Interaction(done[0].before.D, alone, comps[-1].D, dict(zip(labels, comps, strict=True)))
             progress.advance(1)
         progress.stage(f"show: {len(eyes)} eyes without and with the added effects", 2)
         if search_eyes is None:
@@ -256,7 +267,8 @@ def _round(search: Evaluator, measured: Measured, effect_names, alpha, progress)
     before = find(search, measured, alpha)
     if not before.significant:
         return Round(before, [], None, "no significant gap: nothing to add")
-    fits = name_effects(search, measured, before, effect_names, alpha, progress)
+    fits = name_effects(search, measured, before, effect_names, alpha, progress) \
+        if effect_names is None or len(effect_names) else []
     best = fits[0] if fits and fits[0].passes() else None
     return Round(before, fits, best, _verdict(best, fits))
 

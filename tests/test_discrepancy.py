@@ -26,7 +26,7 @@ from analysis.discrepancy import hidden_measured, run_discrepancy
 from analysis.discrepancy_data import Measured, guestrin2006_real, load
 from analysis.discrepancy_guestrin import guestrin_metrics
 from analysis.discrepancy_search import max_evaluations, search_effects
-from analysis.discrepancy_stats import holm
+from analysis.discrepancy_stats import holm, normal_score, permutation_p
 from emulator import effects
 from emulator.effects import Applied, simulate_with
 from emulator.eye.population import sample
@@ -111,19 +111,68 @@ def test_measured_data_round_trip_and_refusals(tmp_path) -> None:
 
 def test_search_recovers_a_known_quadratic_minimum_and_its_curvature() -> None:
     def roll(batch):  # D = 4 (roll - 1.3)^2 + 3: minimum 1.3 deg, 1-sigma sqrt(2 / 8) = 0.5 deg
-        return np.array([4 * (a.values["roll_deg"] - 1.3) ** 2 + 3 for a in batch])
+        return [{"D": np.array([4 * (a.values["roll_deg"] - 1.3) ** 2 + 3])} for a in batch]
 
     def decentre(batch):  # a correlated 2-D bowl around (0.2, 0.1) mm
         x, y = (np.array([a.values[k] for a in batch]) for k in ("nasal_mm", "superior_mm"))
-        return 100 * ((x - 0.2) ** 2 + (y - 0.1) ** 2 + (x - 0.2) * (y - 0.1)) + 1
+        return [{"D": np.array([d])} for d in 100 * ((x - 0.2) ** 2 + (y - 0.1) ** 2 + (x - 0.2) * (y - 0.1)) + 1]
 
-    fit = search_effects([effects.get("head_roll")], roll, D0=100.0, n_conditions=7)[0]
+    def score(m):
+        return float(m["D"][0])
+
+    fit = search_effects([effects.get("head_roll")], roll, score, D0=100.0, n_conditions=7)[0]
     assert fit.values["roll_deg"] == pytest.approx(1.3, abs=1e-6) and abs(fit.D - 3.0) < 1e-9
-    assert fit.sigma["roll_deg"] == pytest.approx(0.5, rel=1e-6) and fit.passes()
+    assert fit.sigma["roll_deg"] == pytest.approx(0.5, rel=1e-6) and fit.passes() and not fit.screened
     assert len(fit.points) <= max_evaluations(fit.effect)
-    fit2 = search_effects([effects.get("pupil_decentre")], decentre, D0=100.0, n_conditions=7)[0]
+    fit2 = search_effects([effects.get("pupil_decentre")], decentre, score, D0=100.0, n_conditions=7)[0]
     assert (fit2.values["nasal_mm"], fit2.values["superior_mm"]) == pytest.approx((0.2, 0.1), abs=1e-6)
     assert fit2.sigma["nasal_mm"] == pytest.approx(np.sqrt(2 * (2 / 3) / 100), rel=1e-3)
+
+
+def test_search_screens_many_effects_and_refines_only_the_best() -> None:
+    def bowl(batch):  # only head_roll can reach D = 2; the others stay near 50
+        out = []
+        for a in batch:
+            d = 4 * (a.values["roll_deg"] - 2.0) ** 2 + 2 if a.effect.name == "head_roll" else \
+                50 + sum((v - 0.01) ** 2 for v in a.values.values())
+            out.append({"D": np.array([d])})
+        return out
+
+    chosen = [effects.get(n) for n in ("feature_noise", "head_roll", "lens_distortion", "corneal_index", "led_position")]
+    fits = search_effects(chosen, bowl, lambda m: float(m["D"][0]), D0=100.0, n_conditions=7, top=2)
+    by = {f.effect.name: f for f in fits}
+    assert by["head_roll"].values["roll_deg"] == pytest.approx(2.0, abs=1e-6) and not by["head_roll"].screened
+    assert sum(f.screened for f in fits) == 3 and all(np.isnan(list(f.sigma.values())[0]) for f in fits if f.screened)
+
+
+def test_a_fit_at_the_edge_of_its_range_is_flagged_and_not_added() -> None:
+    def falling(batch):  # D falls toward k1 = +3 (the bound) and beyond
+        return [{"D": np.array([100.0 - 20.0 * a.values["k1"]])} for a in batch]
+
+    fit = search_effects([effects.get("lens_distortion")], falling, lambda m: float(m["D"][0]), D0=100.0,
+                         n_conditions=7)[0]
+    assert fit.values["k1"] == pytest.approx(3.0) and fit.at_edge == ["k1"]
+    assert fit.lowers() and not fit.passes()
+
+
+def test_permutation_tests_hold_their_level_on_four_skewed_subjects() -> None:
+    rng = np.random.default_rng(3)
+    hits = 0
+    for trial in range(200):  # lognormal errors, 4 "subjects" against 20 "eyes" of the same distribution
+        sim, meas = rng.lognormal(-1.0, 0.6, 20), rng.lognormal(-1.0, 0.6, 4)
+        p_mean, p_spread = permutation_p(sim, meas, seed=trial, B=999)
+        hits += p_mean < 0.05
+        assert 0 < p_mean <= 1 and 0 < p_spread <= 1
+    assert hits <= 20  # 10 expected at the 5 % level; the t-test's excess came from the skew
+    p_mean, _ = permutation_p(rng.normal(0, 1, 30), rng.normal(3, 1, 6), seed=1, B=999)
+    assert p_mean < 0.01
+
+
+def test_normal_scores_and_the_spread_term() -> None:
+    assert normal_score(2.0, 1e6) == pytest.approx(2.0, abs=1e-4)
+    assert 0 < normal_score(5.0, 3) < 5.0 and normal_score(-5.0, 3) == -normal_score(5.0, 3)
+    assert normal_score(1e6, 3) > 0
+    np.testing.assert_allclose(holm(np.array([0.01, np.nan, 0.04])), [0.02, np.nan, 0.04])
 
 
 def test_holm_adjustment_known_answer() -> None:
