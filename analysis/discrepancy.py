@@ -53,6 +53,7 @@ from emulator.eye.model import EyeModel
 
 ALPHA_GOF = 0.01
 LATER_CANDIDATES = 8
+CHUNK = 12  # points per evaluation call (each a batched calibration)
 
 
 def _evaluations(chosen: Sequence[Effect]) -> int:
@@ -175,8 +176,14 @@ def name_effects(evaluator: Evaluator, measured: Measured, before: Comparison, e
     def score(metrics) -> float:
         return compare(metrics, measured, evaluator.experiment.reference, alpha, tests=False).D
 
-    fits = search_effects(candidates(evaluator, effect_names), lambda batch: evaluator.evaluate([[a] for a in batch]),
-                          score, before.D, before.n_terms, progress=progress.advance)
+    def evaluate(batch: list[Applied]) -> list:
+        out = []
+        for i in range(0, len(batch), CHUNK):  # chunks, so that progress is heard every few seconds
+            out += evaluator.evaluate([[a] for a in batch[i:i + CHUNK]])
+            progress.advance(len(batch[i:i + CHUNK]))
+        return out
+
+    fits = search_effects(candidates(evaluator, effect_names), evaluate, score, before.D, before.n_terms)
     return sorted(fits, key=lambda f: (f.screened, f.score))
 
 

@@ -4,7 +4,9 @@ An experiment turns features into per-eye conditions (degrees, one array (E,) pe
 
 - guestrin2006 (scene `guestrin2006`, right eye, 9 targets x 5 head positions): "H1", "H2",
   "head:<name>", "bias_x:H1|H2", "bias_y:H1|H2" (`analysis.discrepancy_guestrin`); H2 and head:* have
-  the reference H1 (compared within subjects when the measured data are paired).
+  the reference H1 (compared within subjects when the measured data are paired); and the feature
+  conditions of `analysis.discrepancy_recording` (pupil-glint vectors and gains, glint spacing, pupil
+  size and shape per head position, referred to the central position).
 - blignaut2014 (scene `blignaut2014`, binocular, 135 targets, one head position): "C5" ... "C135", each
   eye's error under the configuration's best function (the model of lowest mean error over the simulated
   eyes, as `analysis.summary`), and "M<k>:<configuration>" for model k; no references.
@@ -31,6 +33,7 @@ import numpy as np
 from analysis import experiments
 from analysis.bridge import eye_samples, screen_targets, tracker_geometry
 from analysis.discrepancy_guestrin import START, guestrin_metrics
+from analysis.discrepancy_recording import feature_conditions, feature_reference
 from analysis.published import CONFIGURATIONS
 from analysis.summary import best_functions
 from drivers.gaze.base import STUDY_VIEWING_DISTANCE_MM, on_screen_error_deg
@@ -52,7 +55,9 @@ class GuestrinExperiment:
     scene = "guestrin2006"
 
     def reference(self, condition: str) -> str | None:
-        return "H1" if condition == "H2" or condition.startswith("head:") else None
+        if condition == "H2" or condition.startswith("head:"):
+            return "H1"
+        return feature_reference(condition)
 
     def diagnostic_conditions(self, host: Scene) -> tuple[str, ...]:
         """H1, the error at each moved head position, and the signed mean error over them (x, y)."""
@@ -78,6 +83,8 @@ class GuestrinExperiment:
             joined = guestrin_metrics_at(replace(features[0], arrays=arrays), host, np.tile(start, (len(reuse), 1)))
             for j, i in enumerate(reuse):
                 out[i] = {k: v[j * n:(j + 1) * n] for k, v in joined.items()}
+        for i, f in enumerate(features):
+            out[i].update(feature_conditions(f))  # type: ignore[union-attr]
         return out  # type: ignore[return-value]
 
     def base_parameters(self, features: Features, host: Scene) -> np.ndarray:

@@ -10,7 +10,7 @@ import importlib
 import os
 import platform
 
-BENCHMARKS = ["forward", "study", "render", "usbip", "device", "zmq", "frames"]
+BENCHMARKS = ["forward", "study", "render", "usbip", "device", "zmq", "frames", "discrepancy"]
 
 
 def main() -> int:
