@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 from analysis import experiments
-from analysis.discrepancy import hidden_measured, run_discrepancy
+from analysis.discrepancy import find, hidden_measured, run_discrepancy
 from analysis.discrepancy_data import Measured, MeasuredCondition, guestrin2006_real, load
 from analysis.discrepancy_guestrin import guestrin_metrics
 from analysis.discrepancy_metrics import Evaluator
@@ -216,13 +216,20 @@ def test_negative_control_finds_no_gap_and_adds_nothing(hidden_eyes) -> None:
 
 
 def test_four_subjects_and_nothing_hidden_show_no_spurious_gap() -> None:
-    """The issue's case: 4 subjects, skewed errors, nothing hidden; the permutation tests hold their level."""
-    four = sample(4, np.random.default_rng(23)).eyes
-    measured = hidden_measured([], eyes=four, seed=9)
-    result = run_discrepancy(measured, eyes=published_eyes()[:24], search_eyes=published_eyes()[:SEARCH_EYES],
-                             effect_names=CANDIDATES, rounds=1)
-    assert result.outcome == "no gap" and not result.after.significant
-    assert {g.test for g in result.after.gaps} == {"permutation"}
+    """The issue's case: 4 subjects of the same population, nothing hidden. The permutation tests hold their
+    level: over 10 draws of 4 eyes (other published eyes, their own noise seed) at most 2 show any
+    significant gap (0.5 expected at the family-wise 5 %; a single draw can differ for real: four eyes with
+    nearly spherical corneas have a lower error level, which the test then rightly reports)."""
+    search = Evaluator("guestrin2006", published_eyes()[:SEARCH_EYES], seed=0)
+    rng = np.random.default_rng(23)
+    pool = published_eyes()[SEARCH_EYES:]
+    flagged = 0
+    for draw in range(10):
+        four = pool[np.sort(rng.choice(len(pool), 4, replace=False))]
+        comparison = find(search, hidden_measured([], eyes=four, seed=100 + draw))
+        assert {g.test for g in comparison.gaps} == {"permutation"}
+        flagged += bool(comparison.significant)
+    assert flagged <= 2
 
 
 def test_an_effect_outside_the_catalogue_is_reported_as_unexplained(hidden_eyes) -> None:
