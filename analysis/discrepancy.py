@@ -203,9 +203,7 @@ def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel
         for i in range(rounds):
             if i == 1:  # later rounds: the effects that lowered D in round 1
                 names = [f.effect.name for f in done[0].fits if f.lowers()][:LATER_CANDIDATES]
-            chosen = candidates(search, names)
-            progress.stage(f"round {i + 1}: fitting {len(chosen)} effects", _evaluations(chosen))
-            current = _round(search, measured, names, alpha, progress)
+            current = _round(search, measured, names, alpha, progress, f"round {i + 1}")
             done.append(current)
             if current.added is None:
                 break
@@ -269,11 +267,13 @@ def decide(rounds: list[Round], final: Comparison, show_after: Comparison, k_tot
                          f"over {final.n_terms} terms, P(chi-square) = {gof:.2g}")
 
 
-def _round(search: Evaluator, measured: Measured, effect_names, alpha, progress) -> Round:
+def _round(search: Evaluator, measured: Measured, effect_names, alpha, progress, label: str) -> Round:
     """Steps 1-3 once."""
     before = find(search, measured, alpha)
     if not before.significant:
         return Round(before, [], None, "no significant gap: nothing to add")
+    chosen = candidates(search, effect_names)
+    progress.stage(f"{label}: fitting {len(chosen)} effects", _evaluations(chosen))
     fits = name_effects(search, measured, before, effect_names, alpha, progress) \
         if effect_names is None or len(effect_names) else []
     best = fits[0] if fits and fits[0].passes() else None
