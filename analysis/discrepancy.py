@@ -20,8 +20,9 @@ The **outcome** (`DiscrepancyResult.outcome`) is decided by a stated criterion:
 
 - "no gap": round 1 found no significant gap; nothing is added.
 - "explained": effects were added, and with them (a) no significant gap is left on the search eyes nor
-  on the show eyes, and (b) the model fits: P(chi-square(n_terms - k_total) >= D) >= `ALPHA_GOF` on the
-  search eyes (goodness of fit of the final model). `named_effects` lists them in the order of the size
+  on the show eyes, and (b) the model fits: goodness-of-fit p >= `ALPHA_GOF` on the search eyes (the
+  permutation test of D of `analysis.discrepancy_stats.permutation_gof` where every condition has
+  per-subject values, else P(chi-square(n_terms - k_total) >= D)). `named_effects` lists them in the order of the size
   of what each explains alone (its own drop of D from the model without effects).
 - "none explains": otherwise. Effects fitted on the way that lowered D are reported as partial, not
   named: a significant gap left after an addition means the addition did not explain the data.
@@ -46,7 +47,7 @@ import numpy as np
 from analysis.discrepancy_data import Measured, MeasuredCondition
 from analysis.discrepancy_metrics import Evaluator
 from analysis.discrepancy_search import TOP, EffectFit, max_evaluations, search_effects
-from analysis.discrepancy_stats import Comparison, compare
+from analysis.discrepancy_stats import Comparison, compare, permutation_gof
 from emulator import effects as registry
 from emulator.effects import Applied, Effect
 from emulator.eye.model import EyeModel
@@ -121,6 +122,7 @@ class DiscrepancyResult:
     fits: list[EffectFit] = field(default_factory=list)  # the added effects' fits, in the order added
     interactions: Interaction | None = None
     settings: dict[str, Any] = field(default_factory=dict)
+    gof_p: float | None = None  # goodness of fit of the final model (search eyes), None if nothing added
 
     @property
     def shrink(self) -> float:
@@ -147,7 +149,7 @@ class DiscrepancyResult:
                 "parameters": parameters,
                 "gap_before": {"D": self.before.D, "significant": [g.condition for g in self.before.significant]},
                 "gap_after": {"D": self.after.D, "significant": [g.condition for g in self.after.significant]},
-                "gap_search_final": {"D": self.final.D, "gof_p": self.final.gof_p(self.k_total),
+                "gap_search_final": {"D": self.final.D, "gof_p": self.gof_p,
                                      "significant": [g.condition for g in self.final.significant]},
                 "shrink": self.shrink,
                 "interaction": None if self.interactions is None else {
@@ -232,7 +234,10 @@ def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel
             show_after = show_before.with_base(added) if added else show_before
         progress.advance(1)
     before, after = find(show_before, measured, alpha), find(show_after, measured, alpha)
-    outcome, reason = decide(done, final, after, sum(len(a.effect.fitted) for a in added))
+    k_total = sum(len(a.effect.fitted) for a in added)
+    gof = permutation_gof(search.base_metrics, measured, search.experiment.reference, final.D) if added else None
+    gof = final.gof_p(k_total) if gof is None else gof
+    outcome, reason = decide(done, final, after, k_total, gof)
     named = []
     if outcome == "explained":
         size = {a.effect.name: (interactions.alone[a.effect.name] if interactions else final.D) for a in added}
@@ -241,11 +246,13 @@ def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel
                 "rounds": rounds, "alpha": alpha, "alpha_gof": ALPHA_GOF, "seed": seed,
                 "evaluations": sum(len(f.points) for r in done for f in r.fits)}
     return DiscrepancyResult(measured, done, added, before, after, final, outcome, reason, named, fits,
-                             interactions, settings)
+                             interactions, settings, gof if added else None)
 
 
-def decide(rounds: list[Round], final: Comparison, show_after: Comparison, k_total: int) -> tuple[str, str]:
-    """The outcome and its reason (module docstring)."""
+def decide(rounds: list[Round], final: Comparison, show_after: Comparison, k_total: int,
+           gof: float | None = None) -> tuple[str, str]:
+    """The outcome and its reason (module docstring); `gof` the goodness-of-fit p of the final model
+    (default the chi-square reading of D)."""
     first = rounds[0]
     if not first.before.significant and first.added is None:
         return "no gap", "no significant gap between the model and the data: nothing added"
@@ -257,14 +264,14 @@ def decide(rounds: list[Round], final: Comparison, show_after: Comparison, k_tot
     if show_after.significant:
         problems.append("significant gaps left on the show eyes: "
                         + ", ".join(f"{g.compared} ({g.kinds(show_after.alpha)})" for g in show_after.significant))
-    gof = final.gof_p(k_total)
+    gof = final.gof_p(k_total) if gof is None else gof
     if gof < ALPHA_GOF:
         problems.append(f"the final model does not fit: D = {final.D:.1f} over {final.n_terms} terms, "
-                        f"{k_total} fitted, P(chi-square) = {gof:.2g} < {ALPHA_GOF}")
+                        f"{k_total} fitted, goodness-of-fit p = {gof:.2g} < {ALPHA_GOF}")
     if problems:
         return "none explains", "none of the known effects explains the gap: " + "; ".join(problems)
     return "explained", (f"no significant gap left (search and show eyes) and the model fits: D = {final.D:.1f} "
-                         f"over {final.n_terms} terms, P(chi-square) = {gof:.2g}")
+                         f"over {final.n_terms} terms, goodness-of-fit p = {gof:.2g}")
 
 
 def _round(search: Evaluator, measured: Measured, effect_names, alpha, progress, label: str) -> Round:

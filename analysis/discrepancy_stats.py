@@ -29,6 +29,14 @@ few the subjects, which the t-distribution is not (four skewed values gave spuri
 parametric p of the statistic above. All mean and spread p-values of a comparison form one family, Holm
 adjusted (`holm`); a gap is significant when its p_holm < alpha. `tests=False` (every point of a search)
 skips the permutations and keeps the parametric p.
+
+**Goodness of fit** (`permutation_gof`): the terms of D are correlated (conditions share subjects; the
+same quantity at several head positions), so D is not a chi-square with one degree of freedom per term.
+Where every measured condition has per-subject values, the null distribution of D itself is drawn by
+relabelling whole units (a simulated eye or a measured subject with all its conditions together) between
+the two samples (`GOF_PERMUTATIONS` relabellings): p = (1 + #{D* >= D}) / (B + 1). The correlations are
+kept, so no independence is assumed; the fitted parameters make the observed D slightly small, so the
+test is conservative toward "fits". Otherwise the chi-square reading (`Comparison.gof_p`).
 """
 
 from __future__ import annotations
@@ -45,6 +53,7 @@ from analysis.stats import welch_t_test_from_stats
 
 SD_FLOOR_DEG = 1e-4
 PERMUTATIONS = 4000
+GOF_PERMUTATIONS = 200
 
 
 @dataclass(frozen=True)
@@ -228,3 +237,31 @@ def permutation_p(sim: np.ndarray, meas: np.ndarray, *, seed: int, B: int = PERM
         return float((1 + np.sum(np.abs(null) >= abs(observed) - 1e-12)) / (B + 1))
 
     return p_of(sim, meas, _welch_t), p_of(sim - sim.mean(), meas - meas.mean(), _log_sd_ratio)
+
+
+def permutation_gof(simulated: Mapping[str, np.ndarray], measured: Measured, reference: Callable[[str], str | None],
+                    D: float, *, B: int = GOF_PERMUTATIONS, seed: int = 0) -> float | None:
+    """P(D* >= D) under relabelling of whole units between simulated eyes and measured subjects (module
+    docstring); None unless every measured condition has per-subject values."""
+    from analysis.discrepancy_data import MeasuredCondition
+
+    if any(c.values is None for c in measured.conditions.values()):
+        return None
+    keys = list(dict.fromkeys([*measured.conditions, *(r for c in measured.conditions if (r := reference(c))
+                                                        and r in measured.conditions)]))
+    sim = np.column_stack([np.asarray(simulated[k], float) for k in keys])
+    sim = sim[np.all(np.isfinite(sim), axis=1)]
+    meas = np.column_stack([measured.conditions[k].values for k in keys])
+    pooled, n = np.vstack([sim, meas]), len(sim)
+    if n < 2 or len(meas) < 2:
+        return None
+    rng = np.random.default_rng(seed)
+    exceed = 0
+    for _ in range(B):
+        order = rng.permutation(len(pooled))
+        s_part, m_part = pooled[order[:n]], pooled[order[n:]]
+        fake = Measured(measured.experiment, {k: MeasuredCondition.of(m_part[:, i]) for i, k in enumerate(keys)
+                                              if k in measured.conditions}, measured.subjects)
+        d = compare({k: s_part[:, i] for i, k in enumerate(keys)}, fake, reference, tests=False).D
+        exceed += d >= D - 1e-12
+    return float((1 + exceed) / (B + 1))

@@ -32,7 +32,7 @@ from analysis.discrepancy_guestrin import guestrin_metrics
 from analysis.discrepancy_metrics import Evaluator
 from analysis.discrepancy_recording import load_recordings, write_recording
 from analysis.discrepancy_search import max_evaluations, search_effects
-from analysis.discrepancy_stats import holm, normal_score, permutation_p
+from analysis.discrepancy_stats import compare, holm, normal_score, permutation_gof, permutation_p
 from emulator import effects
 from emulator.effects import Applied, simulate_with
 from emulator.effects.run import join_heads, perturb
@@ -176,6 +176,27 @@ def test_permutation_tests_hold_their_level_on_four_skewed_subjects() -> None:
     assert hits <= 20  # 10 expected at the 5 % level; the t-test's excess came from the skew
     p_mean, _ = permutation_p(rng.normal(0, 1, 30), rng.normal(3, 1, 6), seed=1, B=999)
     assert p_mean < 0.01
+
+
+def test_permutation_goodness_of_fit_keeps_correlated_terms() -> None:
+    """Seven conditions that share one subject effect (strongly correlated terms): the relabelling test of
+    D holds its level where the terms are exchangeable, and rejects a shift of six of them."""
+    rng = np.random.default_rng(1)
+
+    def reference(c):
+        return "a" if c.startswith("b") else None
+
+    def case(shift):
+        sim_a, meas_a = rng.normal(0, 1, 40), rng.normal(0, 1, 15)
+        sim = {"a": sim_a, **{f"b{i}": sim_a + rng.normal(0, 0.2, 40) for i in range(6)}}
+        meas = Measured("x", {"a": MeasuredCondition.of(meas_a), **{
+            f"b{i}": MeasuredCondition.of(meas_a + shift + rng.normal(0, 0.2, 15)) for i in range(6)}},
+            tuple(str(i) for i in range(15)))
+        D = compare(sim, meas, reference, tests=False).D
+        return permutation_gof(sim, meas, reference, D, B=199)
+
+    assert sum(case(0.0) < 0.05 for _ in range(20)) <= 3
+    assert case(0.3) < 0.01
 
 
 def test_normal_scores_and_the_spread_term() -> None:
