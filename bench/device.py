@@ -2,7 +2,7 @@
 
 The device runs in its own process (`eyehil emulate --link pty --script demo`: fixations, saccades,
 a pursuit, blinks; real-time clock); the host (this process) opens the pseudo-terminal with
-`drivers.client.open_tracker`, synchronises clocks with PINGs (docs/protocol.md, PONG), streams for
+`eyehil.drivers.client.open_tracker`, synchronises clocks with PINGs (docs/protocol.md, PONG), streams for
 `SECONDS` at each rate and measures the latency from the device timestamp (mid-exposure) to the
 decoded sample on the host: latency = host arrival - (device timestamp - clock offset). A rate is
 sustained when no sample was dropped by the device or lost on the link and the p99 latency meets the
@@ -19,7 +19,7 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from drivers.client import open_tracker
+from eyehil.drivers.client import open_tracker
 
 RATES_HZ = (500, 1000, 2000)
 SECONDS = 3.0
@@ -29,7 +29,7 @@ P99_TARGET_MS = 2.0
 @contextmanager
 def emulator(*extra: str):
     """Start `eyehil emulate --link pty` in a subprocess; yield the pseudo-terminal's path."""
-    cmd = [sys.executable, "-m", "eyehil_cli", "emulate", "--link", "pty", "--script", "demo", *extra]
+    cmd = [sys.executable, "-m", "eyehil.cli", "emulate", "--link", "pty", "--script", "demo", *extra]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
     try:
         url = ""

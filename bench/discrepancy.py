@@ -8,10 +8,10 @@ from __future__ import annotations
 import resource
 import time
 
-from analysis.discrepancy import run_discrepancy
-from analysis.discrepancy_data import guestrin2006_real
-from analysis.runner import default_workers
-from emulator.eye.published import published_eyes
+from eyehil.analysis.discrepancy.data import guestrin2006_real
+from eyehil.analysis.discrepancy.workflow import run_discrepancy
+from eyehil.analysis.study.runner import default_workers
+from eyehil.emulator.eye.published import published_eyes
 
 TARGET_SECONDS = 60.0
 SEARCH_EYES = 20

@@ -11,9 +11,9 @@ import time
 
 import numpy as np
 
-from emulator.eye.published import published_eyes
-from emulator.forward import simulate
-from emulator.scene import load_scene
+from eyehil.emulator.eye.published import published_eyes
+from eyehil.emulator.forward import simulate
+from eyehil.emulator.scene import load_scene
 
 TARGET_SECONDS = 30.0
 

@@ -2,11 +2,11 @@
 
 The device runs in its own process (`eyehil emulate --link pty|tcp --script demo --clock fast`, guestrin2006:
 one eye, one 320 x 240 crop per exposure, MONO8, 19 chunks); the host (this process) configures frames only,
-reassembles the chunks (`drivers.wire`) and counts the images delivered per second of wall time, with the
+reassembles the chunks (`eyehil.drivers.wire`) and counts the images delivered per second of wall time, with the
 device's STATUS `frames_dropped`. The fast clock lets the device run as fast as the link and host allow, but
 never slower than the wall clock: exposures the device cannot render and send within the frame interval of the
 configured rate are dropped, so the rate (`RATE_HZ`) is set below what the link carries. Then detection
-throughput: `drivers.detect.detect_eye` on the received images, one core. Target (issue "Synthetic infrared
+throughput: `eyehil.drivers.detect.detect_eye` on the received images, one core. Target (issue "Synthetic infrared
 frames"): hundreds (here >= `TARGET_FPS`) of 320 x 240 frames per second over a pty and TCP.
 """
 
@@ -17,9 +17,9 @@ import time
 import cv2
 
 from bench.device import emulator
-from drivers.client import open_tracker
-from drivers.detect import detect_eye
-from protocols.enums import StreamSelect
+from eyehil.drivers.client import open_tracker
+from eyehil.drivers.detect import detect_eye
+from eyehil.protocols.enums import StreamSelect
 
 LINKS = ("pty", "tcp")
 RATE_HZ = 100

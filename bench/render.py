@@ -2,7 +2,7 @@
 
 Frames of 20 published eyes x 9 targets of the Guestrin 2006 scene (central head position; the geometry,
 `render_geometry.eye_outlines`, is computed once beforehand and not timed): a 320x240 region of interest
-rendered with ground truth, the full 640x480 frame rendered, and the region detected (`drivers.detect`).
+rendered with ground truth, the full 640x480 frame rendered, and the region detected (`eyehil.drivers.detect`).
 Targets (issue "Synthetic infrared frames"): >= 1,000 region frames/s and >= 300 full frames/s rendered,
 >= 500 region frames/s detected.
 """
@@ -14,12 +14,12 @@ import time
 import cv2
 import numpy as np
 
-from drivers.detect import detect_eye
-from emulator.eye.published import published_eyes
-from emulator.forward import simulate
-from emulator.render import render_full, render_roi
-from emulator.render_geometry import eye_outlines
-from emulator.scene import load_scene
+from eyehil.drivers.detect import detect_eye
+from eyehil.emulator.eye.published import published_eyes
+from eyehil.emulator.forward import simulate
+from eyehil.emulator.render.geometry import eye_outlines
+from eyehil.emulator.render.renderer import render_full, render_roi
+from eyehil.emulator.scene import load_scene
 
 TARGETS = {"roi_render_fps": 1000.0, "full_render_fps": 300.0, "roi_detect_fps": 500.0}
 

@@ -7,10 +7,10 @@ from __future__ import annotations
 
 import time
 
-from analysis.runner import default_workers
-from analysis.study import run_study
-from analysis.summary import summarise_study
-from emulator.eye.published import published_eyes
+from eyehil.analysis.study.replication import run_study
+from eyehil.analysis.study.runner import default_workers
+from eyehil.analysis.study.summary import summarise_study
+from eyehil.emulator.eye.published import published_eyes
 
 TARGET_SECONDS = 60.0
 

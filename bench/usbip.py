@@ -14,8 +14,8 @@ import time
 
 import numpy as np
 
-from drivers.links.usbip import UsbipSerial
-from emulator.device.usbip_server import UsbipCdcServer
+from eyehil.drivers.links.usbip import UsbipSerial
+from eyehil.emulator.device.links.usbip.server import UsbipCdcServer
 
 SIZE = 16 * 1024 * 1024
 MESSAGE = bytes(range(74))

@@ -36,8 +36,8 @@ SWITCH_INTERVAL_S = 0.0005
 
 def serve(argv: list[str]) -> None:
     """The facade process: prints ``port: N`` and serves until SIGTERM."""
-    from emulator.device.build import DeviceOptions, build_subject
-    from emulator.device.zmq_server import PupilServer, ServerOptions
+    from eyehil.emulator.device.build import DeviceOptions, build_subject
+    from eyehil.emulator.device.pupil.server import PupilServer, ServerOptions
 
     p = argparse.ArgumentParser(prog="python -m bench.zmq serve")
     p.add_argument("--rate", type=int, default=RATE_HZ)

@@ -9,6 +9,6 @@
   camera frames with OpenCV; `frames`: the frames-only mode (FRAME_CHUNKs -> images -> detected samples).
 """
 
-from drivers.client import Tracker, open_tracker
+from eyehil.drivers.client import Tracker, open_tracker
 
 __all__ = ["Tracker", "open_tracker"]

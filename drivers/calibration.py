@@ -5,13 +5,13 @@ discards the samples of the first `settle_s` after the device acknowledged it (t
 and saccade), and averages the usable samples of the next `collect_s` (device time) into one fixation.
 Calibration targets come first, then validation targets. The samples come either from the device's
 FEATURES (`frames=False`) or, in frames-only mode (`frames=True`), from its camera images: the host
-detects pupil and glints itself (`drivers.frames.FrameReader`, LEDs matched with the geometry's). Methods:
+detects pupil and glints itself (`eyehil.drivers.frames.FrameReader`, LEDs matched with the geometry's). Methods:
 
-- ``guestrin``: Guestrin & Eizenman 2006, model-based (`drivers.gaze.guestrin`), one eye, the LEDs of
+- ``guestrin``: Guestrin & Eizenman 2006, model-based (`eyehil.drivers.gaze.guestrin`), one eye, the LEDs of
   the geometry file (two);
-- ``blignaut``: Blignaut 2014 interpolation (`drivers.gaze.blignaut`), both eyes, LED 0.
+- ``blignaut``: Blignaut 2014 interpolation (`eyehil.drivers.gaze.blignaut`), both eyes, LED 0.
 
-Targets and estimates are in SCREEN mm of `drivers.gaze.geometry` (from the screen centre along world
+Targets and estimates are in SCREEN mm of `eyehil.drivers.gaze.geometry` (from the screen centre along world
 +x = the subject's left, and +y = up). The STIMULUS message wants mm from the top-left corner, x to the
 subject's right, y down: `screen_to_stimulus` is the one conversion (it assumes the default screen axes).
 Validation error: the angle at the world origin (the subject's reference eye position, midway between
@@ -25,16 +25,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drivers.client import Tracker
-from drivers.errors import CalibrationError
-from drivers.features import binocular_samples, eye_samples, fixation_mean
-from drivers.frames import FrameReader, reader_for
-from drivers.gaze.base import BinocularSamples, Calibration, EyeSamples, angular_error_deg
-from drivers.gaze.blignaut import BlignautEstimator
-from drivers.gaze.geometry import Screen, TrackerGeometry
-from drivers.gaze.guestrin import GuestrinEstimator
-from drivers.wire import Sample
-from protocols.enums import Capability, Eye, EyeSelect, StreamSelect
+from eyehil.drivers.client import Tracker
+from eyehil.drivers.errors import CalibrationError
+from eyehil.drivers.features import binocular_samples, eye_samples, fixation_mean
+from eyehil.drivers.frames import FrameReader, reader_for
+from eyehil.drivers.gaze.base import BinocularSamples, Calibration, EyeSamples, angular_error_deg
+from eyehil.drivers.gaze.blignaut import BlignautEstimator
+from eyehil.drivers.gaze.geometry import Screen, TrackerGeometry
+from eyehil.drivers.gaze.guestrin import GuestrinEstimator
+from eyehil.drivers.wire import Sample
+from eyehil.protocols.enums import Capability, Eye, EyeSelect, StreamSelect
 
 METHODS = ("guestrin", "blignaut")
 

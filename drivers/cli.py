@@ -1,7 +1,7 @@
 """Host subcommands: `eyehil info | stream | calibrate | record URL`.
 
 URL: a device path (/dev/ttyACM0, a pseudo-terminal), socket://host:port, loop://?options (an
-in-process emulator), spy://<URL> (hex dump), usbip://host:port (see `drivers.links`).
+in-process emulator), spy://<URL> (hex dump), usbip://host:port (see `eyehil.drivers.links`).
 
     eyehil info /dev/pts/5
     eyehil stream socket://127.0.0.1:5555 --rate 500 --duration 2
@@ -22,13 +22,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from drivers.calibration import METHODS, Plan, calibrate, gaze, grid, screen_to_stimulus
-from drivers.client import Tracker, open_tracker
-from drivers.errors import TrackerError
-from drivers.frames import FrameReader, reader_for
-from drivers.recording import Recorder
-from drivers.setup_file import load_geometry
-from protocols.enums import Eye, EyeSelect, StreamSelect
+from eyehil.drivers.calibration import METHODS, Plan, calibrate, gaze, grid, screen_to_stimulus
+from eyehil.drivers.client import Tracker, open_tracker
+from eyehil.drivers.errors import TrackerError
+from eyehil.drivers.frames import FrameReader, reader_for
+from eyehil.drivers.recording import Recorder
+from eyehil.drivers.setup_file import load_geometry
+from eyehil.protocols.enums import Eye, EyeSelect, StreamSelect
 
 EYES = {"right": EyeSelect.RIGHT, "left": EyeSelect.LEFT, "both": EyeSelect.BOTH}
 
@@ -85,7 +85,7 @@ def register_record(sub: argparse._SubParsersAction) -> None:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    """Add every host subcommand (eyehil_cli registers them one by one)."""
+    """Add every host subcommand (eyehil.cli registers them one by one)."""
     for add in (register_info, register_stream, register_calibrate, register_record):
         add(sub)
 

@@ -3,7 +3,7 @@
     with open_tracker("socket://127.0.0.1:5555") as tracker:     # handshake: GET_INFO, version check
         tracker.configure(rate_hz=500)
         tracker.start()
-        for sample in tracker.samples(count=1000):                # drivers.wire.Sample
+        for sample in tracker.samples(count=1000):                # eyehil.drivers.wire.Sample
             ...
         tracker.stop()
         print(tracker.stats)                                      # lost frames, CRC errors, retries ...
@@ -21,15 +21,15 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
-from drivers.errors import CommandRefusedError, IncompatibleDeviceError, TrackerError, TrackerTimeoutError
-from drivers.links import open_link
-from drivers.wire import Reply, Sample, Wire
-from protocols.enums import Capability, DeviceState, EyeSelect, StimulusFlags, StreamSelect
-from protocols.errors import ErrorCode
-from protocols.header import PROTOCOL_VERSION
-from protocols.messages import Configure, GetInfo, GetStatus, Ping, Start, Stimulus, Stop
-from protocols.native import Message
-from protocols.replies import Ack, DeviceInfo, ErrorReply, Pong, Status
+from eyehil.drivers.errors import CommandRefusedError, IncompatibleDeviceError, TrackerError, TrackerTimeoutError
+from eyehil.drivers.links import open_link
+from eyehil.drivers.wire import Reply, Sample, Wire
+from eyehil.protocols.enums import Capability, DeviceState, EyeSelect, StimulusFlags, StreamSelect
+from eyehil.protocols.errors import ErrorCode
+from eyehil.protocols.header import PROTOCOL_VERSION
+from eyehil.protocols.messages import Configure, GetInfo, GetStatus, Ping, Start, Stimulus, Stop
+from eyehil.protocols.native import Message
+from eyehil.protocols.replies import Ack, DeviceInfo, ErrorReply, Pong, Status
 
 
 @dataclass(frozen=True)
@@ -75,7 +75,7 @@ class Tracker:
 
     @property
     def stats(self):
-        """`drivers.wire.HostStats` of this link."""
+        """`eyehil.drivers.wire.HostStats` of this link."""
         return self.wire.stats
 
     def handshake(self) -> DeviceInfo:
@@ -231,7 +231,7 @@ class Tracker:
 
 
 def open_tracker(url: str, **kwargs) -> Tracker:
-    """Open `url` (see `drivers.links.SCHEMES`) and handshake; keyword arguments go to `Tracker`."""
+    """Open `url` (see `eyehil.drivers.links.SCHEMES`) and handshake; keyword arguments go to `Tracker`."""
     link = open_link(url, timeout=0.0)
     try:
         return Tracker(link, url=url, **kwargs)

@@ -9,13 +9,13 @@
      └── CalibrationError                 too few usable samples, or the estimator could not fit
 
 Faults on the wire (CRC errors, lost frames, malformed frames) are not exceptions: the client counts
-them (`drivers.client.HostStats`) and goes on, as the protocol's receiver rules require. Malformed
-recording files raise `drivers.recording.RecordingError` (a ValueError), not a TrackerError.
+them (`eyehil.drivers.client.HostStats`) and goes on, as the protocol's receiver rules require. Malformed
+recording files raise `eyehil.drivers.recording.RecordingError` (a ValueError), not a TrackerError.
 """
 
 from __future__ import annotations
 
-from protocols.errors import ErrorCode
+from eyehil.protocols.errors import ErrorCode
 
 
 class TrackerError(Exception):

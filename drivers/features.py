@@ -1,4 +1,4 @@
-"""Received samples as the arrays the gaze estimators take (`drivers.gaze.base.EyeSamples`).
+"""Received samples as the arrays the gaze estimators take (`eyehil.drivers.gaze.base.EyeSamples`).
 
 A sample is usable for one eye when its pupil is DETECTED (and not BLINK) and every glint carried is
 VALID. Image coordinates are full-sensor pixels (OpenCV convention), as on the wire.
@@ -10,9 +10,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from drivers.gaze.base import BinocularSamples, EyeSamples
-from drivers.wire import Sample
-from protocols.enums import Eye, GlintFlags, PupilFlags
+from eyehil.drivers.gaze.base import BinocularSamples, EyeSamples
+from eyehil.drivers.wire import Sample
+from eyehil.protocols.enums import Eye, GlintFlags, PupilFlags
 
 
 def eye_arrays(samples: Sequence[Sample], eye: Eye, n_leds: int | None = None

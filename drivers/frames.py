@@ -4,17 +4,17 @@
         tracker.configure(leds=2, stream=StreamSelect.FRAMES)
         reader = FrameReader(tracker, led_xy_mm=geometry.leds[:, :2])
         tracker.start()
-        for sample in reader.samples(count=100):     # drivers.wire.Sample, as on the FEATURES path
+        for sample in reader.samples(count=100):     # eyehil.drivers.wire.Sample, as on the FEATURES path
             ...
 
 `FrameReader` groups the images the wire reassembled (`Wire.images`) by exposure (frame id): one crop
 per selected eye (eye RIGHT / LEFT), or one image of the region of interest (eye BOTH). When an
-exposure's images are all there it runs `drivers.detect` on them (`detect_eye` on a crop or on a region
+exposure's images are all there it runs `eyehil.drivers.detect` on them (`detect_eye` on a crop or on a region
 showing one selected eye, `detect_frame` on a region showing both) and returns a `Sample` with the
 exposure's frame id and device time (mid-exposure), the arrival of its last image (host us), and one
 `EyeFeatures` per selected eye in the order right, left, each with one glint record per lit LED
-(missing ones without VALID): the records a device streams, so `drivers.features` and
-`drivers.calibration` take them unchanged. Coordinates are full-sensor px, as on the wire.
+(missing ones without VALID): the records a device streams, so `eyehil.drivers.features` and
+`eyehil.drivers.calibration` take them unchanged. Coordinates are full-sensor px, as on the wire.
 
 An exposure some of whose images never came is abandoned (`incomplete`) once a later one is complete;
 `Sample.skipped_before` counts the exposures missing before a sample (images the device dropped, or
@@ -35,14 +35,14 @@ from dataclasses import replace
 
 import numpy as np
 
-from drivers.client import Tracker
-from drivers.detect import DetectorSettings, detect_eye, detect_frame
-from drivers.errors import TrackerTimeoutError
-from drivers.wire import ReceivedImage, Sample
-from protocols.enums import Eye, EyeSelect, GlintFlags
-from protocols.header import seq_gap
-from protocols.native import default_configure
-from protocols.samples import EyeFeatures, Glint
+from eyehil.drivers.client import Tracker
+from eyehil.drivers.detect import DetectorSettings, detect_eye, detect_frame
+from eyehil.drivers.errors import TrackerTimeoutError
+from eyehil.drivers.wire import ReceivedImage, Sample
+from eyehil.protocols.enums import Eye, EyeSelect, GlintFlags
+from eyehil.protocols.header import seq_gap
+from eyehil.protocols.native import default_configure
+from eyehil.protocols.samples import EyeFeatures, Glint
 
 
 class FrameReader:

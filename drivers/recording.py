@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from drivers.wire import Sample, host_now_us
-from protocols.replies import Status
+from eyehil.drivers.wire import Sample, host_now_us
+from eyehil.protocols.replies import Status
 
 FORMAT = "eyehil-recording"
 VERSION = 1

@@ -1,4 +1,4 @@
-"""The host's tracker geometry file (TOML): camera, LEDs and screen in the WORLD frame of `drivers.gaze.geometry`.
+"""The host's tracker geometry file (TOML): camera, LEDs and screen in the WORLD frame of `eyehil.drivers.gaze.geometry`.
 
 A real tracker ships this as its setup file; the emulator writes one for its scene with
 ``eyehil emulate --write-geometry FILE``. Format, version 1 (mm, px; every key required unless noted)::
@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers.gaze.geometry import Camera, Screen, TrackerGeometry
+from eyehil.drivers.gaze.geometry import Camera, Screen, TrackerGeometry
 
 FORMAT = "eyehil-geometry"
 VERSION = 1

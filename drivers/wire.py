@@ -1,9 +1,9 @@
 """The host end of a native-protocol link: sequence-numbered sends, and a receive path that never hangs.
 
-`Wire` owns one SerialLike (`drivers.links`) and a `protocols.NativeReceiver`. `pump(wait_s)` reads
+`Wire` owns one SerialLike (`eyehil.drivers.links`) and a `protocols.NativeReceiver`. `pump(wait_s)` reads
 whatever arrives within `wait_s` seconds (waiting with select() on the link's descriptor when it has
 one, else with the link's own read timeout), decodes it, and sorts it: FEATURES become `Sample`s in
-`samples`, FRAME_CHUNKs are reassembled (`protocols.images.ImageAssembler`) into `ReceivedImage`s in
+`samples`, FRAME_CHUNKs are reassembled (`eyehil.protocols.images.ImageAssembler`) into `ReceivedImage`s in
 `images`, every other message goes to `replies` with its arrival time. Faults are counted, never
 raised (`HostStats`); only a failing link raises (`LinkError`). Host times are microseconds of
 ``time.monotonic_ns()``.
@@ -16,13 +16,13 @@ import time
 from collections import deque
 from dataclasses import dataclass, fields
 
-from drivers.errors import LinkError
-from protocols.header import SEQ_MODULUS, Header, seq_gap
-from protocols.images import Image, ImageAssembler
-from protocols.native import DEVICE_TYPES, Message, encode
-from protocols.replies import ErrorReply
-from protocols.samples import EyeFeatures, Features, FrameChunk
-from protocols.stream import NativeReceiver, Received
+from eyehil.drivers.errors import LinkError
+from eyehil.protocols.header import SEQ_MODULUS, Header, seq_gap
+from eyehil.protocols.images import Image, ImageAssembler
+from eyehil.protocols.native import DEVICE_TYPES, Message, encode
+from eyehil.protocols.replies import ErrorReply
+from eyehil.protocols.samples import EyeFeatures, Features, FrameChunk
+from eyehil.protocols.stream import NativeReceiver, Received
 
 CHUNK = 65536
 MAX_BUFFERED_SAMPLES = 200_000

@@ -25,12 +25,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.eye.media import Media
-from emulator.eye.model import EyeModel
-from emulator.eye.surfaces import cornea_optics, lens_surfaces, pupil_centre, retina
-from emulator.optics.newton import newton2d
-from emulator.optics.pupil import trace_into_eye
-from emulator.optics.rays import _dot, distance_to_line, refract, unit
+from eyehil.emulator.eye.media import Media
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.eye.surfaces import cornea_optics, lens_surfaces, pupil_centre, retina
+from eyehil.emulator.optics.newton import newton2d
+from eyehil.emulator.optics.pupil import trace_into_eye
+from eyehil.emulator.optics.rays import _dot, distance_to_line, refract, unit
 
 FIXATION_TOLERANCE_MM = 0.01
 

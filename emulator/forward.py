@@ -21,15 +21,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.eye.media import Media
-from emulator.eye.model import EyeModel
-from emulator.eye.surfaces import cornea_optics, pupil_centre
-from emulator.features import Features, empty_features
-from emulator.fixation import LineOfSight, eye_centres, line_of_sight, listing_torsion, posed, solve_fixation
-from emulator.optics.ellipse import fit_ellipse
-from emulator.optics.glint import solve_glints
-from emulator.optics.pupil import pupil_boundary, solve_exit_points
-from emulator.scene import HeadPose, Scene
+from eyehil.emulator.eye.media import Media
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.eye.surfaces import cornea_optics, pupil_centre
+from eyehil.emulator.features import Features, empty_features
+from eyehil.emulator.fixation import LineOfSight, eye_centres, line_of_sight, listing_torsion, posed, solve_fixation
+from eyehil.emulator.optics.ellipse import fit_ellipse
+from eyehil.emulator.optics.glint import solve_glints
+from eyehil.emulator.optics.pupil import pupil_boundary, solve_exit_points
+from eyehil.emulator.scene import HeadPose, Scene
 
 POINTS_PER_CHUNK = 120_000
 

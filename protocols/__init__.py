@@ -9,7 +9,7 @@
 - `errors`: the exception tree (drawn in its docstring) and the ERROR codes.
 """
 
-from protocols.enums import (
+from eyehil.protocols.enums import (
     Capability,
     DeviceState,
     Eye,
@@ -20,7 +20,7 @@ from protocols.enums import (
     StimulusFlags,
     StreamSelect,
 )
-from protocols.errors import (
+from eyehil.protocols.errors import (
     BadLengthError,
     BadMagicError,
     CobsDecodeError,
@@ -32,10 +32,10 @@ from protocols.errors import (
     UnknownMessageTypeError,
     UnsupportedVersionError,
 )
-from protocols.framing import FrameDecoder, FramingFault, encode_frame
-from protocols.header import PROTOCOL_VERSION, Header, MessageType, seq_gap
-from protocols.messages import Configure, GetInfo, GetStatus, Ping, Start, Stimulus, Stop
-from protocols.native import (
+from eyehil.protocols.framing import FrameDecoder, FramingFault, encode_frame
+from eyehil.protocols.header import PROTOCOL_VERSION, Header, MessageType, seq_gap
+from eyehil.protocols.messages import Configure, GetInfo, GetStatus, Ping, Start, Stimulus, Stop
+from eyehil.protocols.native import (
     DEVICE_TYPES,
     HOST_TYPES,
     MESSAGE_CLASSES,
@@ -48,9 +48,9 @@ from protocols.native import (
     encode_raw,
     error_reply_for,
 )
-from protocols.replies import Ack, DeviceInfo, ErrorReply, Pong, Status
-from protocols.samples import EyeFeatures, Features, FrameChunk, Glint
-from protocols.stream import NativeReceiver, Received, Rejected
+from eyehil.protocols.replies import Ack, DeviceInfo, ErrorReply, Pong, Status
+from eyehil.protocols.samples import EyeFeatures, Features, FrameChunk, Glint
+from eyehil.protocols.stream import NativeReceiver, Received, Rejected
 
 __all__ = [
     "DEVICE_TYPES",

@@ -4,7 +4,7 @@ A FEATURES frame with a fixed number of eyes E and glints per eye G has a fixed 
 structured dtype (`features_dtype`) describes the whole frame (header, payload, CRC) byte for byte.
 `encode_features_batch` fills N such records at once and returns the N wire frames, identical to
 `native.encode(Features(...))` of each sample; `decode_features_batch` is the inverse for frames of one
-shape. Arrays: N samples, E eyes, G glints; coordinates px, angles degrees (see `protocols.samples`).
+shape. Arrays: N samples, E eyes, G glints; coordinates px, angles degrees (see `eyehil.protocols.samples`).
 """
 
 from __future__ import annotations
@@ -14,10 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from protocols.crc import crc16
-from protocols.errors import BadLengthError, BadMagicError, CrcError, MalformedPayloadError
-from protocols.framing import encode_frame
-from protocols.header import MAGIC, MIN_FRAME_SIZE, PROTOCOL_VERSION, SEQ_MODULUS, MessageType
+from eyehil.protocols.crc import crc16
+from eyehil.protocols.errors import BadLengthError, BadMagicError, CrcError, MalformedPayloadError
+from eyehil.protocols.framing import encode_frame
+from eyehil.protocols.header import MAGIC, MIN_FRAME_SIZE, PROTOCOL_VERSION, SEQ_MODULUS, MessageType
 
 _GLINT = np.dtype([("led", "u1"), ("flags", "u1"), ("x", "<f4"), ("y", "<f4")])
 _PUPIL = [("eye", "u1"), ("flags", "u1")] + [

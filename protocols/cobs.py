@@ -16,12 +16,12 @@ byte for the empty string.
 Known answers (hex): ``00`` -> ``01 01``; ``00 00`` -> ``01 01 01``; ``11 22 00 33`` -> ``03 11 22 02 33``;
 ``11 22 33 44`` -> ``05 11 22 33 44``; ``11 00 00 00`` -> ``02 11 01 01 01``; 254 bytes ``01..FE`` ->
 ``FF 01..FE``; 255 bytes ``01..FF`` -> ``FF 01..FE 02 FF``. The frame delimiter 0x00 is not part of
-these strings: `protocols.framing` adds it.
+these strings: `eyehil.protocols.framing` adds it.
 """
 
 from __future__ import annotations
 
-from protocols.errors import CobsDecodeError
+from eyehil.protocols.errors import CobsDecodeError
 
 MAX_BLOCK = 254  # data bytes in one block of code 0xFF
 

@@ -15,7 +15,7 @@ Every exception a codec raises on bad input derives from `ProtocolError` (itself
 Each exception carries `seq` and `msg_type` (None where the frame could not be trusted that far) and a
 class attribute `error_code`: the `ErrorCode` a device answers with, or None when the device must stay
 silent (framing, CRC and magic errors are only counted: the sequence number cannot be trusted).
-`protocols.framing.FrameDecoder.feed` never raises: it reports faults as events.
+`eyehil.protocols.framing.FrameDecoder.feed` never raises: it reports faults as events.
 Encoders raise plain `ValueError` for values that do not fit the wire (a 70-byte string, a negative
 timestamp): that is a bug in the caller, not an event on the link.
 """

@@ -10,7 +10,7 @@ silently. A frame whose encoding grows beyond ``max_encoded_size(max_frame)`` is
 does, reported once as an ``oversized`` fault, and the bytes up to the next 0x00 are discarded without
 being buffered, so memory stays bounded whatever a broken sender emits.
 
-This layer knows nothing of headers or CRCs: `protocols.native.decode` checks those.
+This layer knows nothing of headers or CRCs: `eyehil.protocols.native.decode` checks those.
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import StrEnum
 
-from protocols import cobs
-from protocols.errors import CobsDecodeError, FramingError
+from eyehil.protocols import cobs
+from eyehil.protocols.errors import CobsDecodeError, FramingError
 
 DELIMITER = b"\x00"
 MAX_FRAME_SIZE = 4116  # decoded bytes: 18-byte header + 4096-byte payload + 2-byte CRC

@@ -23,9 +23,9 @@ import struct
 from dataclasses import dataclass
 from enum import IntEnum
 
-from protocols.crc import CRC_SIZE, crc16
-from protocols.errors import BadLengthError, BadMagicError, CrcError, FramingError, UnsupportedVersionError
-from protocols.framing import MAX_FRAME_SIZE
+from eyehil.protocols.crc import CRC_SIZE, crc16
+from eyehil.protocols.errors import BadLengthError, BadMagicError, CrcError, FramingError, UnsupportedVersionError
+from eyehil.protocols.framing import MAX_FRAME_SIZE
 
 MAGIC = 0x4845
 PROTOCOL_VERSION = 1

@@ -1,6 +1,6 @@
 """Camera images as FRAME_CHUNK messages: split on the device side, reassemble on the host side.
 
-Pure helpers around `protocols.samples.FrameChunk`. The device sends the chunks of one image in order,
+Pure helpers around `eyehil.protocols.samples.FrameChunk`. The device sends the chunks of one image in order,
 and may abandon an image (link too slow, STOP): the host's `ImageAssembler` then drops the partial
 image when a chunk of a newer frame id arrives and counts it in ``incomplete``.
 """
@@ -11,9 +11,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from protocols.enums import Eye, PixelFormat
-from protocols.header import MAX_PAYLOAD
-from protocols.samples import FrameChunk
+from eyehil.protocols.enums import Eye, PixelFormat
+from eyehil.protocols.header import MAX_PAYLOAD
+from eyehil.protocols.samples import FrameChunk
 
 MAX_CHUNK_DATA = MAX_PAYLOAD - FrameChunk.STRUCT.size  # 4074 pixel bytes per chunk
 _FORMATS = {np.dtype(np.uint8): PixelFormat.MONO8, np.dtype("<u2"): PixelFormat.MONO16}

@@ -3,7 +3,7 @@
 Every message class has ``TYPE`` (its `MessageType`), ``to_payload() -> bytes`` and
 ``from_payload(bytes)`` (raises `MalformedPayloadError`). Fixed-layout messages are one little-endian
 struct of their fields in declaration order (`Fixed`); the struct format is given next to each class.
-Replies are in `protocols.replies`, streamed samples (FEATURES, FRAME_CHUNK) in `protocols.samples`.
+Replies are in `eyehil.protocols.replies`, streamed samples (FEATURES, FRAME_CHUNK) in `eyehil.protocols.samples`.
 Wire layouts: docs/protocol.md.
 """
 
@@ -13,9 +13,9 @@ import struct
 from dataclasses import dataclass, fields
 from typing import ClassVar, Self
 
-from protocols.enums import EyeSelect, StimulusFlags, StreamSelect
-from protocols.errors import MalformedPayloadError
-from protocols.header import MessageType
+from eyehil.protocols.enums import EyeSelect, StimulusFlags, StreamSelect
+from eyehil.protocols.errors import MalformedPayloadError
+from eyehil.protocols.header import MessageType
 
 MAX_TEXT = 64  # bytes of UTF-8 in a string field
 

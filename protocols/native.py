@@ -3,7 +3,7 @@
     wire = encode(Configure(leds=2, rate_hz=500), seq=7, timestamp_us=123)      # ready to write
     header, message = decode(frame)                  # frame: one item FrameDecoder.feed returned
 
-``decode`` raises the `protocols.errors` tree (`ProtocolError` and subclasses); a device answers the
+``decode`` raises the `eyehil.protocols.errors` tree (`ProtocolError` and subclasses); a device answers the
 ones with an ``error_code`` using `error_reply_for`. Message classes: `MESSAGE_CLASSES`. The
 device-side rules for CONFIGURE (ranges, defaults) are here too, as pure functions, so that every
 device implementation refuses the same things with the same codes. Specification: docs/protocol.md.
@@ -11,14 +11,14 @@ device implementation refuses the same things with the same codes. Specification
 
 from __future__ import annotations
 
-from protocols import cobs
-from protocols.enums import Capability, EyeSelect, StreamSelect
-from protocols.errors import ErrorCode, MalformedPayloadError, ProtocolError, UnknownMessageTypeError
-from protocols.framing import encode_frame
-from protocols.header import SUPPORTED_VERSIONS, Header, MessageType, pack_frame, unpack_frame
-from protocols.messages import Configure, GetInfo, GetStatus, Ping, Start, Stimulus, Stop, truncate_utf8
-from protocols.replies import Ack, DeviceInfo, ErrorReply, Pong, Status
-from protocols.samples import Features, FrameChunk
+from eyehil.protocols import cobs
+from eyehil.protocols.enums import Capability, EyeSelect, StreamSelect
+from eyehil.protocols.errors import ErrorCode, MalformedPayloadError, ProtocolError, UnknownMessageTypeError
+from eyehil.protocols.framing import encode_frame
+from eyehil.protocols.header import SUPPORTED_VERSIONS, Header, MessageType, pack_frame, unpack_frame
+from eyehil.protocols.messages import Configure, GetInfo, GetStatus, Ping, Start, Stimulus, Stop, truncate_utf8
+from eyehil.protocols.replies import Ack, DeviceInfo, ErrorReply, Pong, Status
+from eyehil.protocols.samples import Features, FrameChunk
 
 Message = (
     Ping | GetInfo | Configure | Start | Stop | GetStatus | Stimulus

@@ -1,6 +1,6 @@
 """Replies of the eyehil native protocol (device -> host): PONG, ACK, STATUS, DEVICE_INFO, ERROR.
 
-Same conventions as `protocols.messages`: frozen dataclasses with ``TYPE``, ``to_payload()`` and
+Same conventions as `eyehil.protocols.messages`: frozen dataclasses with ``TYPE``, ``to_payload()`` and
 ``from_payload()``; the wire layout is given in each class docstring and in docs/protocol.md.
 """
 
@@ -11,10 +11,10 @@ from contextlib import suppress
 from dataclasses import dataclass
 from typing import ClassVar, Self
 
-from protocols.enums import Capability, DeviceState
-from protocols.errors import ErrorCode, MalformedPayloadError
-from protocols.header import MessageType
-from protocols.messages import Fixed, check_length, field_values, pack_text, unpack_text
+from eyehil.protocols.enums import Capability, DeviceState
+from eyehil.protocols.errors import ErrorCode, MalformedPayloadError
+from eyehil.protocols.header import MessageType
+from eyehil.protocols.messages import Fixed, check_length, field_values, pack_text, unpack_text
 
 
 @dataclass(frozen=True, slots=True)

@@ -3,7 +3,7 @@
 Image coordinates are in pixels of the full sensor, OpenCV convention (origin at the centre of the
 top-left pixel, x right, y down), whatever region of interest is configured. A pupil ellipse is given
 by its centre, its full axis lengths a >= b and the angle of axis a in degrees from image +x toward
-image +y, in [0, 180) (the convention of `emulator.optics.ellipse`).
+image +y, in [0, 180) (the convention of `eyehil.emulator.optics.ellipse`).
 
 FEATURES payload: ``<IB`` frame id, eye count; per eye ``<BBffffffB`` eye, PupilFlags, centre x, y,
 axes a, b, angle, confidence (0..1), glint count; per glint ``<BBff`` LED id, GlintFlags, x, y.
@@ -16,10 +16,10 @@ import struct
 from dataclasses import dataclass
 from typing import ClassVar, Self
 
-from protocols.enums import Eye, GlintFlags, PixelFormat, PupilFlags
-from protocols.errors import MalformedPayloadError
-from protocols.header import MessageType
-from protocols.messages import field_values
+from eyehil.protocols.enums import Eye, GlintFlags, PixelFormat, PupilFlags
+from eyehil.protocols.errors import MalformedPayloadError
+from eyehil.protocols.header import MessageType
+from eyehil.protocols.messages import field_values
 
 FEATURES_HEAD = struct.Struct("<IB")
 EYE_RECORD = struct.Struct("<BBffffffB")

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from protocols.errors import (
+from eyehil.protocols.errors import (
     BadMagicError,
     CrcError,
     FramingError,
@@ -20,10 +20,10 @@ from protocols.errors import (
     UnknownMessageTypeError,
     UnsupportedVersionError,
 )
-from protocols.framing import MAX_FRAME_SIZE, FaultKind, FrameDecoder, FramingFault
-from protocols.header import SUPPORTED_VERSIONS, Header, MessageType, seq_gap
-from protocols.native import Message, decode, error_reply_for
-from protocols.replies import ErrorReply
+from eyehil.protocols.framing import MAX_FRAME_SIZE, FaultKind, FrameDecoder, FramingFault
+from eyehil.protocols.header import SUPPORTED_VERSIONS, Header, MessageType, seq_gap
+from eyehil.protocols.native import Message, decode, error_reply_for
+from eyehil.protocols.replies import ErrorReply
 
 
 @dataclass(frozen=True, slots=True)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from emulator.eye.biometry import eye_from_biometry
-from emulator.eye.model import EyeModel
+from eyehil.emulator.eye.biometry import eye_from_biometry
+from eyehil.emulator.eye.model import EyeModel
 
 
 def make_eyes(n: int = 4, seed: int = 0) -> EyeModel:

@@ -1,7 +1,7 @@
 """The leak check shared by the device, USB/IP and ZeroMQ suites (python-can's test/conftest.py idea).
 
 `leak_check(...)` is a context manager around one test: afterwards no thread whose name starts with
-`thread_prefix` may run, no emulator link may be registered open (`emulator.device.links.open_links`),
+`thread_prefix` may run, no emulator link may be registered open (`eyehil.emulator.device.links.base.open_links`),
 and no descriptor of the given kinds (or listening TCP socket) opened during the test may remain.
 Descriptors are read from Linux /proc; elsewhere only threads and links are checked.
 """
@@ -13,7 +13,7 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-from emulator.device.links import open_links
+from eyehil.emulator.device.links.base import open_links
 
 PROC = os.path.isdir("/proc/self/fd")
 

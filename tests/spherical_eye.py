@@ -1,6 +1,6 @@
 """An independent analytic forward model of a spherical-cornea eye, for testing the host estimators.
 
-World frame as in `drivers.gaze.geometry` (mm; x to the subject's left, y up, z toward the screen).
+World frame as in `eyehil.drivers.gaze.geometry` (mm; x to the subject's left, y up, z toward the screen).
 The eye: a corneal sphere of radius R centred at c; the pupil centre p = c + K w on the optic axis w;
 c = E + d w with E the centre of rotation. Axes by the angle-addition form of Guestrin & Eizenman 2006:
 w = [cos(phi) sin(theta), sin(phi), cos(phi) cos(theta)] and the visual axis through c,
@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drivers.gaze.base import EyeSamples
-from drivers.gaze.geometry import Camera, Screen, TrackerGeometry
+from eyehil.drivers.gaze.base import EyeSamples
+from eyehil.drivers.gaze.geometry import Camera, Screen, TrackerGeometry
 
 GUESTRIN_CAMERA_O = np.array([0.0, -150.5, 615.0])
 RIGHT_APEX = np.array([-31.5, 0.0, 0.0])

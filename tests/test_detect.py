@@ -9,17 +9,17 @@ from dataclasses import dataclass, field
 import numpy as np
 import pytest
 
-from drivers.detect import FAILURES, detect_eye, detect_frame
-from drivers.detect_glints import match_leds
-from emulator.eye.population import sample
-from emulator.eye.published import published_eyes
-from emulator.features import Features
-from emulator.forward import simulate
-from emulator.render import render_features, render_full, render_roi
-from emulator.render_geometry import eye_outlines
-from emulator.scene import HeadPose, load_scene
-from protocols.enums import PupilFlags
-from protocols.samples import Features as FeaturesRecord
+from eyehil.drivers.detect import FAILURES, detect_eye, detect_frame
+from eyehil.drivers.detect.glints import match_leds
+from eyehil.emulator.eye.population import sample
+from eyehil.emulator.eye.published import published_eyes
+from eyehil.emulator.features import Features
+from eyehil.emulator.forward import simulate
+from eyehil.emulator.render.geometry import eye_outlines
+from eyehil.emulator.render.renderer import render_features, render_full, render_roi
+from eyehil.emulator.scene import HeadPose, load_scene
+from eyehil.protocols.enums import PupilFlags
+from eyehil.protocols.samples import Features as FeaturesRecord
 
 N_RANDOM = 220  # random eyes and poses per preset (>= 200)
 TOLERANCE_PX = 0.1  # RMS, pupil centre and glints (issue 6)
@@ -205,7 +205,7 @@ def _detected_features(features: Features, eyes, scene, rng) -> tuple[Features, 
 
 
 def test_guestrin_calibration_from_frames_matches_exact_features():
-    from analysis.experiments import guestrin
+    from eyehil.analysis.study.experiments import guestrin
 
     scene = load_scene("guestrin2006")
     eyes = published_eyes()[:10]
@@ -223,9 +223,9 @@ def test_blignaut_calibration_from_frames_matches_exact_features():
     """Every model and calibration set with at least two more targets than terms (so that the fit has
     residual degrees of freedom) agrees within 0.1 deg; fits as determined as model 8 at C9 (8 terms, 9
     targets) amplify any feature error and are reported, not tested."""
-    from analysis.experiments import blignaut
-    from analysis.published import CONFIGURATIONS, calibration_sets
-    from drivers.gaze.forms import MODELS, resolve_form
+    from eyehil.analysis.study.experiments import blignaut
+    from eyehil.analysis.study.published import CONFIGURATIONS, calibration_sets
+    from eyehil.drivers.gaze.forms import MODELS, resolve_form
 
     scene = load_scene("blignaut2014")
     eyes = published_eyes()[:6]

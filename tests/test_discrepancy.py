@@ -3,7 +3,7 @@
 Hidden-effect tests: "measured" data are simulated on other eyes (a Rozema 2011 draw, seed 11, 20 eyes;
 noise seed 5) with one effect at a known value; the workflow runs on 12 of the published eyes (noise
 seed 0) without being told, choosing among five effects of the catalogue (`CANDIDATES`, to bound the
-runtime; the whole catalogue is tried by `python -m analysis.discrepancy_trials`, docs/discrepancy.md),
+runtime; the whole catalogue is tried by `python -m eyehil.analysis.discrepancy.trials`, docs/discrepancy.md),
 and must (a) find a significant gap, (b) name the hidden effect, (c) fit its parameter near the hidden
 value and (d) shrink the gap measure D by >= 70 %, adding nothing else. Further: a pair named in order,
 an effect outside the candidates reported as unexplained, a pure mean gap that noise cannot explain,
@@ -25,22 +25,22 @@ import json
 import numpy as np
 import pytest
 
-from analysis import experiments
-from analysis.discrepancy import find, hidden_measured, run_discrepancy
-from analysis.discrepancy_data import Measured, MeasuredCondition, guestrin2006_real, load
-from analysis.discrepancy_guestrin import guestrin_metrics
-from analysis.discrepancy_metrics import Evaluator
-from analysis.discrepancy_recording import load_recordings, write_recording
-from analysis.discrepancy_search import max_evaluations, search_effects
-from analysis.discrepancy_stats import compare, holm, normal_score, permutation_gof, permutation_p
-from emulator import effects
-from emulator.effects import Applied, simulate_with
-from emulator.effects.run import join_heads, perturb
-from emulator.eye.population import sample
-from emulator.eye.published import published_eyes
-from emulator.forward import simulate
-from emulator.scene import load_scene
-from eyehil_cli import main
+from eyehil.analysis.discrepancy.data import Measured, MeasuredCondition, guestrin2006_real, load
+from eyehil.analysis.discrepancy.guestrin import guestrin_metrics
+from eyehil.analysis.discrepancy.metrics import Evaluator
+from eyehil.analysis.discrepancy.recording import load_recordings, write_recording
+from eyehil.analysis.discrepancy.search import max_evaluations, search_effects
+from eyehil.analysis.discrepancy.stats import compare, holm, normal_score, permutation_gof, permutation_p
+from eyehil.analysis.discrepancy.workflow import find, hidden_measured, run_discrepancy
+from eyehil.analysis.study import experiments
+from eyehil.cli import main
+from eyehil.emulator import effects
+from eyehil.emulator.effects import Applied, simulate_with
+from eyehil.emulator.effects.run import join_heads, perturb
+from eyehil.emulator.eye.population import sample
+from eyehil.emulator.eye.published import published_eyes
+from eyehil.emulator.forward import simulate
+from eyehil.emulator.scene import load_scene
 
 SEARCH_EYES = 12
 CANDIDATES = ["feature_noise", "pupil_decentre", "pupil_change", "lens_distortion", "head_roll"]

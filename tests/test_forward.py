@@ -7,10 +7,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from emulator.eye.published import published_eyes
-from emulator.forward import Poses, simulate
-from emulator.optics.camera import PinholeCamera
-from emulator.scene import Scene, Screen, load_scene
+from eyehil.emulator.eye.published import published_eyes
+from eyehil.emulator.forward import Poses, simulate
+from eyehil.emulator.optics.camera import PinholeCamera
+from eyehil.emulator.scene import Scene, Screen, load_scene
 
 
 @pytest.fixture(scope="module")

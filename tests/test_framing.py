@@ -8,10 +8,17 @@ import itertools
 import numpy as np
 import pytest
 
-from protocols import cobs
-from protocols.crc import CRC16_CHECK, crc16, crc16_bitwise
-from protocols.errors import CobsDecodeError, FramingError
-from protocols.framing import MAX_ENCODED_SIZE, MAX_FRAME_SIZE, FaultKind, FrameDecoder, FramingFault, encode_frame
+from eyehil.protocols import cobs
+from eyehil.protocols.crc import CRC16_CHECK, crc16, crc16_bitwise
+from eyehil.protocols.errors import CobsDecodeError, FramingError
+from eyehil.protocols.framing import (
+    MAX_ENCODED_SIZE,
+    MAX_FRAME_SIZE,
+    FaultKind,
+    FrameDecoder,
+    FramingFault,
+    encode_frame,
+)
 
 # Written from the definition (Cheshire & Baker 1999), the examples also listed on Wikipedia's COBS page.
 COBS_KNOWN = [

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drivers.gaze.base import BinocularSamples, CalibrationFailure, EyeSamples
-from drivers.gaze.blignaut import BlignautEstimator, fit_form, normalised_pupil_glint
-from drivers.gaze.forms import FORMS, MODELS, describe, design_matrix, resolve_form
+from eyehil.drivers.gaze.base import BinocularSamples, CalibrationFailure, EyeSamples
+from eyehil.drivers.gaze.blignaut import BlignautEstimator, fit_form, normalised_pupil_glint
+from eyehil.drivers.gaze.forms import FORMS, MODELS, describe, design_matrix, resolve_form
 
 TERMS = {1: (2, 2), 2: (4, 4), 3: (6, 6), 4: (7, 7), 5: (4, 4), 6: (4, 5), 7: (5, 7), 8: (8, 7)}
 

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from spherical_eye import RIGHT_APEX, SphericalEye, guestrin_geometry, simulate
 
-from drivers.gaze.base import CalibrationFailure, EyeSamples, angular_error_deg, on_screen_error_deg
-from drivers.gaze.geometry import Camera, Screen, TrackerGeometry
-from drivers.gaze.guestrin import EyeParameters, GuestrinEstimator, point_of_gaze, reconstruct, visual_axis
+from eyehil.drivers.gaze.base import CalibrationFailure, EyeSamples, angular_error_deg, on_screen_error_deg
+from eyehil.drivers.gaze.geometry import Camera, Screen, TrackerGeometry
+from eyehil.drivers.gaze.guestrin import EyeParameters, GuestrinEstimator, point_of_gaze, reconstruct, visual_axis
 
 HEAD_OFFSETS = {"central": (0, 0, 0), "left": (30, 0, 0), "right": (-30, 0, 0), "forward": (0, 0, 40),
                 "back": (0, 0, -40), "oblique": (12, 15, -25)}

@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from emulator.eye.normative import NORMATIVE_NAMES, normative_eye, normative_media
-from emulator.eye.population import parameter_table
-from emulator.eye.published import HYPERBOLOID_CLIP, conditional_lens_power, published_biometry, published_eyes
-from emulator.eye.rozema import rozema2011
+from eyehil.emulator.eye.normative import NORMATIVE_NAMES, normative_eye, normative_media
+from eyehil.emulator.eye.population import parameter_table
+from eyehil.emulator.eye.published import HYPERBOLOID_CLIP, conditional_lens_power, published_biometry, published_eyes
+from eyehil.emulator.eye.rozema import rozema2011
 
 SHARED_EYES = Path(__file__).resolve().parents[2] / "shared" / "data" / "fischer2023_eyes.csv"
 #: Table 4 of Fischer et al. 2023: mean, SD, and half the last digit shown (n_lens left out: see below).

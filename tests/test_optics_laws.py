@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from emulator.optics.camera import PinholeCamera
-from emulator.optics.conic import Conic
-from emulator.optics.ellipse import fit_ellipse
-from emulator.optics.rays import reflect, refract, unit
+from eyehil.emulator.optics.camera import PinholeCamera
+from eyehil.emulator.optics.conic import Conic
+from eyehil.emulator.optics.ellipse import fit_ellipse
+from eyehil.emulator.optics.rays import reflect, refract, unit
 
 RNG = np.random.default_rng(42)
 

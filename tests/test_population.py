@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from emulator.eye.population import (
+from eyehil.emulator.eye.population import (
     REJECTION_REASONS,
     STUDY_KEYS,
     TABLE4_KEYS,
@@ -25,7 +25,7 @@ from emulator.eye.population import (
     sample_raw,
     study_parameters,
 )
-from emulator.eye.rozema import RawDraws, rozema2011, thick_lens_index
+from eyehil.emulator.eye.rozema import RawDraws, rozema2011, thick_lens_index
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 N_LARGE = 200_000

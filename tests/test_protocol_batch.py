@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from protocols import CrcError, Eye, FrameChunk, MalformedPayloadError, cobs, decode_wire, encode
-from protocols.batch import FeaturesBatch, decode_features_batch, encode_features_batch, features_dtype
-from protocols.errors import BadLengthError
-from protocols.images import MAX_CHUNK_DATA, ImageAssembler, split_image
-from protocols.samples import EyeFeatures, Features, Glint
+from eyehil.protocols import CrcError, Eye, FrameChunk, MalformedPayloadError, cobs, decode_wire, encode
+from eyehil.protocols.batch import FeaturesBatch, decode_features_batch, encode_features_batch, features_dtype
+from eyehil.protocols.errors import BadLengthError
+from eyehil.protocols.images import MAX_CHUNK_DATA, ImageAssembler, split_image
+from eyehil.protocols.samples import EyeFeatures, Features, Glint
 
 
 def _batch(rng: np.random.Generator, n: int, n_eyes: int, n_glints: int) -> FeaturesBatch:

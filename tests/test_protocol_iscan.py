@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from protocols.iscan import (
+from eyehil.protocols.iscan import (
     DEFAULT_OUTPUTS,
     HEADER_WORD,
     IscanCommand,

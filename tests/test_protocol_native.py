@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from protocols import (
+from eyehil.protocols import (
     HOST_TYPES,
     MESSAGE_CLASSES,
     BadLengthError,
@@ -39,7 +39,7 @@ from protocols import (
     error_reply_for,
     seq_gap,
 )
-from protocols.header import HEADER, MAX_PAYLOAD, pack_frame, unpack_frame
+from eyehil.protocols.header import HEADER, MAX_PAYLOAD, pack_frame, unpack_frame
 
 GOLDEN = Path(__file__).parent / "golden"
 

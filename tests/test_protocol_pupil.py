@@ -6,7 +6,7 @@ import msgpack
 import numpy as np
 import pytest
 
-from protocols.pupil import (
+from eyehil.protocols.pupil import (
     FRAME_FORMATS,
     MAX_REF_DATA,
     REPLY_FORWARDED,

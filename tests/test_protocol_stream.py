@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 import pytest
 
-from protocols import (
+from eyehil.protocols import (
     HOST_TYPES,
     Capability,
     Configure,
@@ -30,7 +30,7 @@ from protocols import (
     encode,
     encode_frame,
 )
-from protocols.header import MessageType, pack_frame
+from eyehil.protocols.header import MessageType, pack_frame
 
 COMMANDS = [Ping(7), GetInfo(), Configure(1, 120), Start()]
 

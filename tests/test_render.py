@@ -7,12 +7,20 @@ import json
 import numpy as np
 import pytest
 
-from emulator.eye.normative import normative_eye
-from emulator.eye.published import published_eyes
-from emulator.forward import Poses, simulate
-from emulator.render import Appearance, RenderSettings, Sensor, render_features, render_full, render_roi, roi_window
-from emulator.render_geometry import eye_outlines, pupil_polar
-from emulator.scene import load_scene
+from eyehil.emulator.eye.normative import normative_eye
+from eyehil.emulator.eye.published import published_eyes
+from eyehil.emulator.forward import Poses, simulate
+from eyehil.emulator.render.geometry import eye_outlines, pupil_polar
+from eyehil.emulator.render.renderer import (
+    Appearance,
+    RenderSettings,
+    Sensor,
+    render_features,
+    render_full,
+    render_roi,
+    roi_window,
+)
+from eyehil.emulator.scene import load_scene
 
 
 @pytest.fixture(scope="module")
@@ -143,7 +151,7 @@ def test_render_features_yields_every_sample_and_both_eyes_in_full_frames():
 def test_cli_render_writes_pngs_and_truth(tmp_path, capsys):
     import cv2
 
-    from eyehil_cli import main
+    from eyehil.cli import main
 
     assert main(["render", "-o", str(tmp_path), "--count", "2"]) == 0
     pngs = sorted(tmp_path.glob("*.png"))

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from emulator.eye.media import Media, cauchy_index
-from emulator.eye.normative import normative_eye
-from emulator.scene import SceneError, load_scene, preset_names
-from eyehil_cli import main
+from eyehil.cli import main
+from eyehil.emulator.eye.media import Media, cauchy_index
+from eyehil.emulator.eye.normative import normative_eye
+from eyehil.emulator.scene import SceneError, load_scene, preset_names
 
 GOOD = """
 name = "mine"

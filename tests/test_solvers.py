@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from emulator.eye.media import Media
-from emulator.eye.surfaces import cornea_optics
-from emulator.fixation import line_of_sight
-from emulator.optics.conic import Conic
-from emulator.optics.glint import solve_glints
-from emulator.optics.pupil import pupil_boundary, solve_exit_points
-from emulator.optics.rays import unit
+from eyehil.emulator.eye.media import Media
+from eyehil.emulator.eye.surfaces import cornea_optics
+from eyehil.emulator.fixation import line_of_sight
+from eyehil.emulator.optics.conic import Conic
+from eyehil.emulator.optics.glint import solve_glints
+from eyehil.emulator.optics.pupil import pupil_boundary, solve_exit_points
+from eyehil.emulator.optics.rays import unit
 
 RNG = np.random.default_rng(7)
 
@@ -52,8 +52,8 @@ def test_glint_off_the_cornea_is_invalid() -> None:
 
 def _single_surface_optics(stop_depth: float = 3.6):
     """One refracting surface (R 7.8, n 1.3375): the posterior cornea separates equal indices."""
-    from emulator.optics.conic import Plane
-    from emulator.optics.pupil import CorneaOptics
+    from eyehil.emulator.optics.conic import Plane
+    from eyehil.emulator.optics.pupil import CorneaOptics
 
     n = 1.3375
     return CorneaOptics(Conic(0.0, 7.8, 0.0, 6.0), Conic(-0.5, 7.3, 0.0, 6.0), Plane(np.asarray(-stop_depth)),
@@ -84,8 +84,8 @@ def test_entrance_pupil_of_a_single_surface_matches_paraxial_optics() -> None:
 def test_apparent_pupil_points_trace_back_to_the_pupil(eyes) -> None:
     media = Media.cauchy(850)
     optics = cornea_optics(eyes, media, 1)
-    from emulator.eye.surfaces import pupil_centre
-    from emulator.optics.pupil import trace_into_eye
+    from eyehil.emulator.eye.surfaces import pupil_centre
+    from eyehil.emulator.optics.pupil import trace_into_eye
 
     boundary = pupil_boundary(pupil_centre(eyes)[..., :2], eyes.pupil_radius, -eyes.stop_depth, 30)
     cam = np.array([5.0, -150.0, 600.0])

@@ -1,4 +1,4 @@
-"""analysis.stats against scipy, statsmodels and textbook formulas; the published Welch comparison."""
+"""eyehil.analysis.study.stats against scipy, statsmodels and textbook formulas; the published Welch comparison."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import statsmodels.api as sm
 from scipy import special
 from scipy import stats as sps
 
-from analysis.stats import (
+from eyehil.analysis.study.stats import (
     f_test_from_stats,
     f_test_variances,
     one_sample_t_test,

@@ -8,13 +8,13 @@ import json
 import numpy as np
 import pytest
 
-from analysis.findings import all_findings
-from analysis.report import write_outputs
-from analysis.runner import run_chunks
-from analysis.study import run_study
-from analysis.summary import summarise_study
-from emulator.eye.population import sample
-from emulator.eye.published import published_eyes
+from eyehil.analysis.study.findings import all_findings
+from eyehil.analysis.study.replication import run_study
+from eyehil.analysis.study.report import write_outputs
+from eyehil.analysis.study.runner import run_chunks
+from eyehil.analysis.study.summary import summarise_study
+from eyehil.emulator.eye.population import sample
+from eyehil.emulator.eye.published import published_eyes
 
 
 @pytest.fixture(scope="module")

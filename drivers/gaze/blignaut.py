@@ -25,8 +25,8 @@ from typing import Literal
 
 import numpy as np
 
-from drivers.gaze.base import BinocularSamples, Calibration, CalibrationFailure, check_targets
-from drivers.gaze.forms import FORMS, MODELS, Form, design_matrix, resolve_form
+from eyehil.drivers.gaze.base import BinocularSamples, Calibration, CalibrationFailure, check_targets
+from eyehil.drivers.gaze.forms import FORMS, MODELS, Form, design_matrix, resolve_form
 
 
 def normalised_pupil_glint(samples: BinocularSamples, led: int = 0) -> tuple[np.ndarray, np.ndarray]:

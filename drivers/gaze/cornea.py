@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from drivers.gaze.geometry import Camera
+from eyehil.drivers.gaze.geometry import Camera
 
 _BISECTIONS = 60
 _GAUSS_NEWTON_STEPS = 6

@@ -29,9 +29,9 @@ from typing import Literal
 import numpy as np
 from scipy.optimize import least_squares
 
-from drivers.gaze.base import Calibration, CalibrationFailure, EyeSamples, check_targets
-from drivers.gaze.cornea import corneal_centre, corneal_centre_one_led, pupil_centre
-from drivers.gaze.geometry import TrackerGeometry
+from eyehil.drivers.gaze.base import Calibration, CalibrationFailure, EyeSamples, check_targets
+from eyehil.drivers.gaze.cornea import corneal_centre, corneal_centre_one_led, pupil_centre
+from eyehil.drivers.gaze.geometry import TrackerGeometry
 
 #: Bounds of the calibrated parameters (mm, mm, deg, deg, dimensionless).
 BOUNDS: Mapping[str, tuple[float, float]] = {

@@ -27,17 +27,17 @@ from __future__ import annotations
 import importlib
 from typing import Protocol
 
-from drivers.errors import LinkError, SchemeUnavailableError
+from eyehil.drivers.errors import LinkError, SchemeUnavailableError
 
 #: scheme -> (module, opener: a function or dotted attribute called as opener(url, timeout=...)).
 #: "" is a plain device path (/dev/ttyACM0, /dev/pts/5, COM3).
 SCHEMES: dict[str, tuple[str, str]] = {
-    "": ("drivers.links.serialport", "open_serial"),
-    "socket": ("drivers.links.tcp", "open_socket"),
-    "rfc2217": ("drivers.links.serialport", "open_serial"),
-    "loop": ("emulator.device.loop", "open_loop"),
-    "spy": ("drivers.links.spy", "open_spy"),
-    "usbip": ("drivers.links.usbip", "UsbipSerial.from_url"),
+    "": ("eyehil.drivers.links.serialport", "open_serial"),
+    "socket": ("eyehil.drivers.links.tcp", "open_socket"),
+    "rfc2217": ("eyehil.drivers.links.serialport", "open_serial"),
+    "loop": ("eyehil.emulator.device.links.loop", "open_loop"),
+    "spy": ("eyehil.drivers.links.spy", "open_spy"),
+    "usbip": ("eyehil.drivers.links.usbip", "UsbipSerial.from_url"),
 }
 #: what to tell the user when a scheme's module is missing
 INSTALL_HINTS: dict[str, str] = {

@@ -81,7 +81,7 @@ class SpyLink:
 
 def open_spy(url: str, timeout: float | None = 0.0, out: TextIO | None = None) -> SpyLink:
     """Open the URL after ``spy://`` and wrap it."""
-    from drivers.links import open_link
+    from eyehil.drivers.links import open_link
 
     inner = url[len("spy://"):]
     if not inner:

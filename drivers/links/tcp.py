@@ -1,6 +1,6 @@
 """``socket://host:port``: a TCP connection with pyserial's read/write/timeout interface.
 
-pyserial's own socket:// handler works too (pass it to `drivers.client.Tracker` directly), but it
+pyserial's own socket:// handler works too (pass it to `eyehil.drivers.client.Tracker` directly), but it
 sleeps 0.3 s in `close` and its `reset_input_buffer` reads for as long as data keeps arriving (forever,
 from a device that streams). This one closes at once and discards only what is already buffered.
 """
@@ -17,7 +17,7 @@ MAX_DISCARD_READS = 64
 
 
 class TcpPort:
-    """A connected TCP socket as a SerialLike (see `drivers.links`)."""
+    """A connected TCP socket as a SerialLike (see `eyehil.drivers.links`)."""
 
     def __init__(self, host: str, port: int, timeout: float | None = 0.0) -> None:
         """Connect to `host`:`port`; raise OSError if nobody listens."""

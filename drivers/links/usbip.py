@@ -1,6 +1,6 @@
 """The host side of the USB link: `usbip://host[:port][/busid]` opened as a pyserial-like port.
 
-The host speaks USB/IP itself (`drivers.links.usbip_client`): it imports the CDC-ACM device over TCP,
+The host speaks USB/IP itself (`eyehil.drivers.links.usbip_client`): it imports the CDC-ACM device over TCP,
 configures it as a CDC-ACM driver would (GET_DESCRIPTOR device and configuration, SET_CONFIGURATION,
 SET_LINE_CODING at `baudrate` 8N1, SET_CONTROL_LINE_STATE with DTR and RTS), then moves data in bulk
 URBs: `write` sends OUT URBs of up to 64 KiB and waits for their completion; `urbs_in_flight` bulk-IN
@@ -27,8 +27,8 @@ from urllib.parse import urlsplit
 
 import serial
 
-from drivers.links.usbip_client import Urb, UsbipClient, UsbipLinkError
-from protocols.usb_descriptors import (
+from eyehil.drivers.links.usbip_client import Urb, UsbipClient, UsbipLinkError
+from eyehil.protocols.usbip.descriptors import (
     CLASS_OUT_INTERFACE,
     LINE_STATE_DTR,
     LINE_STATE_RTS,
@@ -39,8 +39,8 @@ from protocols.usb_descriptors import (
     SetupPacket,
     find_cdc_endpoints,
 )
-from protocols.usbip import USBIP_PORT
-from protocols.usbip_urb import Direction
+from eyehil.protocols.usbip.messages import USBIP_PORT
+from eyehil.protocols.usbip.urb import Direction
 
 WRITE_CHUNK = 64 * 1024
 

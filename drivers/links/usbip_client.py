@@ -1,7 +1,7 @@
 """A small USB/IP client: list a server's devices, import one, submit URBs and collect their completions.
 
 No kernel module and no third-party package: the host talks USB/IP itself over TCP (the codecs are in
-`protocols.usbip` and `protocols.usbip_urb`). One reader thread receives every RET_SUBMIT/RET_UNLINK
+`eyehil.protocols.usbip.messages` and `eyehil.protocols.usbip.urb`). One reader thread receives every RET_SUBMIT/RET_UNLINK
 and completes the matching `Urb` (its event is set, then its callback, if any, runs in the reader
 thread); submitting and unlinking are thread-safe. When the connection breaks, every outstanding URB
 completes with `URB_SHUTDOWN` and `on_broken` is called once.
@@ -19,8 +19,8 @@ from itertools import count
 
 import serial
 
-from protocols.usb_descriptors import SetupPacket
-from protocols.usbip import (
+from eyehil.protocols.usbip.descriptors import SetupPacket
+from eyehil.protocols.usbip.messages import (
     OP_HEADER,
     USB_DEVICE,
     USB_INTERFACE,
@@ -33,7 +33,7 @@ from protocols.usbip import (
     UsbipError,
     encode_import_request,
 )
-from protocols.usbip_urb import (
+from eyehil.protocols.usbip.urb import (
     URB_HEADER_SIZE,
     URB_UNLINKED,
     CmdSubmit,

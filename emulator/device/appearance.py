@@ -1,8 +1,8 @@
 """What the renderer needs of an exposure, carried as extra channels of the subject's features.
 
-`emulator.render` draws an eye from its image-plane geometry (`render_geometry.EyeOutline`): the
+`eyehil.emulator.render.renderer` draws an eye from its image-plane geometry (`render_geometry.EyeOutline`): the
 ray-traced pupil outline, the limbus, the glints and the eyelid margins. The device's subject computes
-features per gaze point (`emulator.device.solver`: exact at fixations, interpolated in a grid during
+features per gaze point (`eyehil.emulator.device.solver`: exact at fixations, interpolated in a grid during
 saccades and pursuits); `AppearanceSolver` appends that geometry to each eye's feature vector, so every
 observation (`Subject.observe`) carries what its frame needs, exact or interpolated exactly like the
 features. Channels per eye, full-sensor px (OpenCV convention), after the `PUPIL_CHANNELS + 2 L` feature
@@ -26,12 +26,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.device.solver import PUPIL_CHANNELS, FeatureSolver, ellipse_from_moments, ellipse_to_moments
-from emulator.eye.model import EyeModel
-from emulator.features import Features
-from emulator.forward import simulate
-from emulator.render_geometry import Eyelids, EyeOutline, eye_outlines, pupil_polar
-from emulator.scene import HeadPose, Scene
+from eyehil.emulator.device.solver import PUPIL_CHANNELS, FeatureSolver, ellipse_from_moments, ellipse_to_moments
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.features import Features
+from eyehil.emulator.forward import simulate
+from eyehil.emulator.render.geometry import Eyelids, EyeOutline, eye_outlines, pupil_polar
+from eyehil.emulator.scene import HeadPose, Scene
 
 
 @dataclass(frozen=True)
@@ -44,7 +44,7 @@ class ChannelLayout:
 
     @property
     def features(self) -> int:
-        """Channels of the features proper (`emulator.device.solver`)."""
+        """Channels of the features proper (`eyehil.emulator.device.solver`)."""
         return PUPIL_CHANNELS + 2 * self.n_leds
 
     def _span(self, index: int) -> slice:

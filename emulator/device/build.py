@@ -1,7 +1,7 @@
 """Build a virtual device from a few named options (command line, loop:// URLs, the pytest plugin).
 
 `DeviceOptions` names everything a device needs: the scene (camera, LEDs, screen, which eyes; `sides`
-overrides the eyes), the eye anatomy (an `emulator.eye.select` spec and an index into it), the head
+overrides the eyes), the eye anatomy (an `eyehil.emulator.eye.select` spec and an index into it), the head
 pose, the behaviour, the script (`"stimulus"`: follow the host's STIMULUS messages; `"demo"`: loop over
 the scene's targets with saccades, a pursuit and blinks), the mode (native or ISCAN), the default rate
 and the clock. A native device also streams frames (`frame_stream`): its subject's solver carries the
@@ -18,16 +18,16 @@ from urllib.parse import parse_qsl
 
 import numpy as np
 
-from emulator.device.appearance import AppearanceSolver
-from emulator.device.clock import make_clock
-from emulator.device.frame_stream import FrameOptions
-from emulator.device.gaze import Blink, Fixation, Pursuit, Segment
-from emulator.device.iscan import IscanTracker
-from emulator.device.solver import FeatureSolver, tracked_scene
-from emulator.device.subject import Behaviour, Subject
-from emulator.device.tracker import VirtualTracker
-from emulator.eye.select import eyes_from_spec
-from emulator.scene import HeadPose, Scene, load_scene
+from eyehil.emulator.device.appearance import AppearanceSolver
+from eyehil.emulator.device.clock import make_clock
+from eyehil.emulator.device.frame_stream import FrameOptions
+from eyehil.emulator.device.gaze import Blink, Fixation, Pursuit, Segment
+from eyehil.emulator.device.iscan import IscanTracker
+from eyehil.emulator.device.solver import FeatureSolver, tracked_scene
+from eyehil.emulator.device.subject import Behaviour, Subject
+from eyehil.emulator.device.tracker import VirtualTracker
+from eyehil.emulator.eye.select import eyes_from_spec
+from eyehil.emulator.scene import HeadPose, Scene, load_scene
 
 
 @dataclass(frozen=True)
@@ -35,7 +35,7 @@ class DeviceOptions:
     """Everything that defines a virtual device; see the module docstring."""
 
     scene: str = "guestrin2006"  # preset name or TOML path
-    eyes: str = "normative:navarro"  # emulator.eye.select spec
+    eyes: str = "normative:navarro"  # eyehil.emulator.eye.select spec
     eye: int = 0  # which eye of the spec (both of the subject's eyes share this anatomy)
     sides: str = ""  # eyes the camera sees: "right", "left", "both"; "" = the scene's own
     seed: int = 0  # for sampled eyes and the subject's random behaviour

@@ -19,10 +19,10 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from emulator.device.solver import PUPIL_CHANNELS, ellipse_from_moments
-from emulator.device.subject import Subject
-from protocols.batch import FeaturesBatch
-from protocols.enums import Eye, GlintFlags, PupilFlags
+from eyehil.emulator.device.solver import PUPIL_CHANNELS, ellipse_from_moments
+from eyehil.emulator.device.subject import Subject
+from eyehil.protocols.batch import FeaturesBatch
+from eyehil.protocols.enums import Eye, GlintFlags, PupilFlags
 
 PREPARE_S = 0.02  # features are prepared this far ahead (device seconds)
 

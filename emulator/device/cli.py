@@ -18,15 +18,15 @@ import importlib
 import signal
 import threading
 
-from emulator.device.build import DeviceOptions, build_device, options_from_query
-from emulator.device.links import LinkRunner
-from emulator.scene import preset_names
+from eyehil.emulator.device.build import DeviceOptions, build_device, options_from_query
+from eyehil.emulator.device.links.base import LinkRunner
+from eyehil.emulator.scene import preset_names
 
 #: link name -> "module:class"; the class takes (host, port) keywords where they mean something.
 LINKS: dict[str, str] = {
-    "pty": "emulator.device.pty_link:PtyLink",
-    "tcp": "emulator.device.tcp_link:TcpLink",
-    "usbip": "emulator.device.usbip_link:UsbipLink",
+    "pty": "eyehil.emulator.device.links.pty:PtyLink",
+    "tcp": "eyehil.emulator.device.links.tcp:TcpLink",
+    "usbip": "eyehil.emulator.device.links.usbip.link:UsbipLink",
 }
 
 
@@ -78,7 +78,7 @@ def make_link(kind: str, host: str, port: int):
 def make_runner(opts: DeviceOptions, args: argparse.Namespace):
     """A `LinkRunner` on the chosen link or, for ``--link zmq``, the Pupil Core facade (imported only then)."""
     if args.link == "zmq":
-        from emulator.device.zmq_server import server_for
+        from eyehil.emulator.device.pupil.server import server_for
 
         return server_for(opts, args.host, args.port or 50020, lsl=args.lsl)
     if args.lsl:
@@ -89,8 +89,8 @@ def make_runner(opts: DeviceOptions, args: argparse.Namespace):
 def run(args: argparse.Namespace) -> int:
     opts = options(args)
     if args.write_geometry:
-        from emulator.device.setup_file import write_geometry
-        from emulator.scene import load_scene
+        from eyehil.emulator.device.setup_file import write_geometry
+        from eyehil.emulator.scene import load_scene
 
         print(f"geometry: {write_geometry(load_scene(opts.scene), args.write_geometry)}", flush=True)
     stop = threading.Event()

@@ -21,7 +21,7 @@ space; floats printed with `repr`, which reads back to the same float64). Full t
     anything else                             -> ERR <reason>
 
 `FirmwareSensor` is the protocol without I/O; `SensorServer` serves it on a Unix socket to one firmware at a
-time, on one thread named "eyehil-sensor ..."; ``python -m emulator.device.firmware_sensor --socket PATH``
+time, on one thread named "eyehil-sensor ..."; ``python -m eyehil.emulator.device.firmware_sensor --socket PATH``
 runs one until interrupted.
 """
 
@@ -39,12 +39,12 @@ from collections.abc import Callable
 
 import numpy as np
 
-from emulator.device.build import DeviceOptions, build_subject, options_from_query
-from emulator.device.camera import Selection, detect
-from emulator.device.links import register_open, unregister
-from emulator.device.stimulus import stimulus_problem, stimulus_to_screen
-from emulator.device.subject import Subject
-from protocols.enums import Eye, StimulusFlags
+from eyehil.emulator.device.build import DeviceOptions, build_subject, options_from_query
+from eyehil.emulator.device.camera import Selection, detect
+from eyehil.emulator.device.links.base import register_open, unregister
+from eyehil.emulator.device.stimulus import stimulus_problem, stimulus_to_screen
+from eyehil.emulator.device.subject import Subject
+from eyehil.protocols.enums import Eye, StimulusFlags
 
 MAX_LINE = 4096  # bytes of one request line
 
@@ -256,8 +256,8 @@ class SensorServer:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m emulator.device.firmware_sensor --socket PATH [--scene S] [--options QUERY]``."""
-    parser = argparse.ArgumentParser(prog="python -m emulator.device.firmware_sensor", description=__doc__,
+    """``python -m eyehil.emulator.device.firmware_sensor --socket PATH [--scene S] [--options QUERY]``."""
+    parser = argparse.ArgumentParser(prog="python -m eyehil.emulator.device.firmware_sensor", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--socket", required=True, help="Unix socket path to listen on (the firmware's --sensor)")
     parser.add_argument("--scene", default="guestrin2006", help="scene preset or TOML path")

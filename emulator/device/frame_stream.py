@@ -26,15 +26,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from emulator.device.appearance import AppearanceSolver, closed
-from emulator.device.camera import Exposures, Selection
-from emulator.device.frames import ExposureRenderer, exposure_rng, render_exposure, render_region
-from emulator.device.subject import Subject
-from emulator.render import DEFAULT_ROI, Frame, RenderSettings
-from protocols.enums import Eye
-from protocols.images import split_image
-from protocols.native import encode
-from protocols.samples import FrameChunk
+from eyehil.emulator.device.appearance import AppearanceSolver, closed
+from eyehil.emulator.device.camera import Exposures, Selection
+from eyehil.emulator.device.frames import ExposureRenderer, exposure_rng, render_exposure, render_region
+from eyehil.emulator.device.subject import Subject
+from eyehil.emulator.render.renderer import DEFAULT_ROI, Frame, RenderSettings
+from eyehil.protocols.enums import Eye
+from eyehil.protocols.images import split_image
+from eyehil.protocols.native import encode
+from eyehil.protocols.samples import FrameChunk
 
 U32 = 1 << 32
 

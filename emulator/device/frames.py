@@ -7,7 +7,7 @@ The stable entry point is
 with `renderer = ExposureRenderer.for_subject(subject)` (the subject's solver must be an
 `appearance.AppearanceSolver`: `build.build_subject` makes one), `values` one row (E, C) of
 `Subject.observe(times).values` (E eyes in the scene's `sides` order), `eye_index` the eye to draw and `rng`
-the noise generator. It returns an `emulator.render.Frame`: an 8-bit image of `size` (w, h) px (clipped to
+the noise generator. It returns an `eyehil.emulator.render.renderer.Frame`: an 8-bit image of `size` (w, h) px (clipped to
 the sensor) whose top-left pixel is sensor pixel `frame.roi_xy`, centred on that eye's pupil (or on
 `centre_px`, full-sensor px; the sensor's centre when neither is known) and kept on the sensor, with its
 ground truth (`frame.truth`, full-sensor px). `render_region` draws several eyes into one fixed window
@@ -25,15 +25,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from emulator.device.appearance import AppearanceSolver, ChannelLayout, outline_from_rows
-from emulator.device.subject import Subject
-from emulator.render import DEFAULT_ROI, Frame, RenderSettings, render_window, roi_window
+from eyehil.emulator.device.appearance import AppearanceSolver, ChannelLayout, outline_from_rows
+from eyehil.emulator.device.subject import Subject
+from eyehil.emulator.render.renderer import DEFAULT_ROI, Frame, RenderSettings, render_window, roi_window
 
 
 @dataclass(frozen=True)
 class ExposureRenderer:
     """What `render_exposure` needs besides the observation: the channel layout, the sensor (w, h) px and how
-    frames look (`emulator.render.RenderSettings`)."""
+    frames look (`eyehil.emulator.render.renderer.RenderSettings`)."""
 
     layout: ChannelLayout
     sensor_px: tuple[int, int]

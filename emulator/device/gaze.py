@@ -1,6 +1,6 @@
 """The simulated subject's gaze over time: a script of fixations, saccades, pursuits and blinks.
 
-Positions are SCREEN coordinates of the scene (`emulator.scene.Screen.to_screen`): mm in the screen
+Positions are SCREEN coordinates of the scene (`eyehil.emulator.scene.Screen.to_screen`): mm in the screen
 plane from its centre, x toward world +x (the subject's left), y up. Times are device microseconds.
 
 A script is a sequence of segments, each starting where the previous one ended:

@@ -15,12 +15,19 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from emulator.device.camera import Camera, Selection
-from emulator.device.clock import Clock, RealTimeClock
-from emulator.device.links import take
-from emulator.device.subject import Subject
-from protocols.enums import Eye, GlintFlags, PupilFlags
-from protocols.iscan import DEFAULT_OUTPUTS, IscanCommand, IscanOutput, encode_samples, parse_commands, select_outputs
+from eyehil.emulator.device.camera import Camera, Selection
+from eyehil.emulator.device.clock import Clock, RealTimeClock
+from eyehil.emulator.device.links.base import take
+from eyehil.emulator.device.subject import Subject
+from eyehil.protocols.enums import Eye, GlintFlags, PupilFlags
+from eyehil.protocols.iscan import (
+    DEFAULT_OUTPUTS,
+    IscanCommand,
+    IscanOutput,
+    encode_samples,
+    parse_commands,
+    select_outputs,
+)
 
 
 class IscanTracker:

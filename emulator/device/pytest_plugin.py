@@ -47,8 +47,8 @@ def _marker_options(request: pytest.FixtureRequest) -> dict:
 
 @pytest.fixture
 def eyehil_options(request: pytest.FixtureRequest):
-    """`emulator.device.build.DeviceOptions` for this test."""
-    from emulator.device.build import DeviceOptions
+    """`eyehil.emulator.device.build.DeviceOptions` for this test."""
+    from eyehil.emulator.device.build import DeviceOptions
 
     wanted = {k: v for k, v in _marker_options(request).items() if k != "link"}
     known = {f.name for f in fields(DeviceOptions)}
@@ -61,15 +61,15 @@ def eyehil_options(request: pytest.FixtureRequest):
 
 @pytest.fixture
 def eyehil_emulator(request: pytest.FixtureRequest, eyehil_options) -> Iterator:
-    """A running emulator (`emulator.device.links.LinkRunner`), closed after the test."""
-    from emulator.device.build import build_device
-    from emulator.device.links import LinkRunner
+    """A running emulator (`eyehil.emulator.device.links.base.LinkRunner`), closed after the test."""
+    from eyehil.emulator.device.build import build_device
+    from eyehil.emulator.device.links.base import LinkRunner
 
     kind = _marker_options(request).get("link", request.config.getoption("eyehil_link"))
     if kind == "tcp":
-        from emulator.device.tcp_link import TcpLink as Link
+        from eyehil.emulator.device.links.tcp import TcpLink as Link
     elif kind == "pty":
-        from emulator.device.pty_link import PtyLink as Link
+        from eyehil.emulator.device.links.pty import PtyLink as Link
     else:
         raise pytest.UsageError(f"eyehil marker: link must be 'pty' or 'tcp', got {kind!r}")
     core = build_device(eyehil_options)
@@ -93,7 +93,7 @@ def eyehil_url(eyehil_emulator) -> str:
 @pytest.fixture
 def eyehil_geometry(eyehil_options, tmp_path: Path) -> Path:
     """The host's tracker geometry file for the emulator's scene."""
-    from emulator.device.setup_file import write_geometry
-    from emulator.scene import load_scene
+    from eyehil.emulator.device.setup_file import write_geometry
+    from eyehil.emulator.scene import load_scene
 
     return write_geometry(load_scene(eyehil_options.scene), tmp_path / "eyehil-geometry.toml")

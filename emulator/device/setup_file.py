@@ -2,9 +2,9 @@
 
 A host calibrating gaze needs its tracker's geometry (camera intrinsics and pose, LED positions,
 screen). A product ships it as a setup file; `eyehil emulate --write-geometry FILE` writes one for the
-emulated scene, and `drivers.setup_file.load_geometry` reads it (the format is specified there, and
+emulated scene, and `eyehil.drivers.setup_file.load_geometry` reads it (the format is specified there, and
 the host never imports the emulator). Frame: the scene frame (mm; x to the subject's left, y up, z
-toward the screen), which is the host's WORLD frame (`drivers.gaze.geometry`). Only the tracker and the
+toward the screen), which is the host's WORLD frame (`eyehil.drivers.gaze.geometry`). Only the tracker and the
 screen are written: the subject's head pose and eyes are not the host's to know.
 """
 
@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.scene import Scene
+from eyehil.emulator.scene import Scene
 
 FORMAT = "eyehil-geometry"
 VERSION = 1
@@ -41,7 +41,7 @@ def geometry_toml(scene: Scene) -> str:
         raise ValueError(f"scene {scene.name}: the host geometry file describes an undistorted pinhole camera")
     lines = [
         f"# Tracker geometry for the emulated scene {scene.name!r}, written by `eyehil emulate --write-geometry`.",
-        "# World frame: mm, x to the subject's left, y up, z toward the screen (drivers.setup_file).",
+        "# World frame: mm, x to the subject's left, y up, z toward the screen (eyehil.drivers.setup_file).",
         f'format = "{FORMAT}"', f"version = {VERSION}", f'scene = "{scene.name}"', "",
         "[camera]",
         f"matrix_px = {_matrix(cam.matrix)}  # intrinsics K",

@@ -1,6 +1,6 @@
 """Image features of the simulated subject as a function of the gaze point on the screen.
 
-The forward model (`emulator.forward.simulate`) is exact but costs about 10 ms per call. A device
+The forward model (`eyehil.emulator.forward.simulate`) is exact but costs about 10 ms per call. A device
 streaming at up to 2 kHz therefore solves each fixation target exactly once (`FeatureSolver.exact`,
 cached per point) and interpolates everything that moves (saccades, pursuits, fixational jitter)
 bilinearly in a grid of exact solutions over the screen (`FeatureField`, built once, lazily).
@@ -23,9 +23,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from emulator.eye.model import EyeModel
-from emulator.forward import simulate
-from emulator.scene import HeadPose, Scene
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.forward import simulate
+from eyehil.emulator.scene import HeadPose, Scene
 
 PUPIL_CHANNELS = 5
 

@@ -8,7 +8,7 @@ This module is the one place where the device converts STIMULUS coordinates to t
 
 - STIMULUS (protocol): mm in the screen's active area, origin at its TOP-LEFT corner as the subject
   sees it, x to the subject's RIGHT, y DOWN (the display's pixel axes scaled by the pixel pitch);
-- scene screen coordinates (`emulator.scene.Screen.to_screen`): mm from the screen CENTRE, x toward
+- scene screen coordinates (`eyehil.emulator.scene.Screen.to_screen`): mm from the screen CENTRE, x toward
   world +x (the subject's LEFT: the subject faces +z, so their right is world -x), y UP.
 
 Hence x_scene = width / 2 - x_mm and y_scene = height / 2 - y_mm. Known answer, guestrin2006 screen
@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 
-from emulator.scene import Screen
+from eyehil.emulator.scene import Screen
 
 #: How far outside the active area a target may be, in screen widths/heights (beyond: INVALID_ARGUMENT).
 OUTSIDE_LIMIT = 1.0

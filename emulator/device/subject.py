@@ -1,8 +1,8 @@
 """The simulated subject: eyes in a head in front of the tracker, looking where a script or the host says.
 
 Positions are screen coordinates of the scene (mm from the screen centre, x toward world +x = the
-subject's left, y up; `emulator.scene`); times are device microseconds. The subject either plays a
-gaze script (`emulator.device.gaze`, repeated by default) or follows the host's STIMULUS messages
+subject's left, y up; `eyehil.emulator.scene`); times are device microseconds. The subject either plays a
+gaze script (`eyehil.emulator.device.gaze`, repeated by default) or follows the host's STIMULUS messages
 (`look_at`): after a saccadic latency it makes a main-sequence saccade to the target and fixates it
 until told otherwise. `observe(times)` returns the image features at exposure times:
 
@@ -20,8 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.device.gaze import Fixation, Kind, Saccade, Segment, Timeline, plan
-from emulator.device.solver import FeatureSolver
+from eyehil.emulator.device.gaze import Fixation, Kind, Saccade, Segment, Timeline, plan
+from eyehil.emulator.device.solver import FeatureSolver
 
 
 @dataclass(frozen=True)
@@ -37,7 +37,7 @@ class Behaviour:
 
 @dataclass(frozen=True)
 class Observation:
-    """Features (N, E, C) (see `emulator.device.solver`; NaN = not found) and eyes closed (N,)."""
+    """Features (N, E, C) (see `eyehil.emulator.device.solver`; NaN = not found) and eyes closed (N,)."""
 
     values: np.ndarray
     blink: np.ndarray

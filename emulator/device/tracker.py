@@ -6,7 +6,7 @@ sleeps or starts a thread; the core is not thread-safe (a link runner serialises
 
 - State machine: IDLE / STREAMING; one configuration (defaults until CONFIGURE), applied at START.
 - Every command gets exactly one response, in order (PONG, DEVICE_INFO, STATUS, ACK or ERROR); frames
-  failing the framing, CRC or magic checks get none and are only counted (`protocols.stream`).
+  failing the framing, CRC or magic checks get none and are only counted (`eyehil.protocols.stream`).
 - Streaming: one FEATURES per exposure at the configured rate, timestamped at mid-exposure; samples
   that would push the output backlog past `max_output_bytes` are dropped (STATUS `samples_dropped`,
   gaps in `frame_id`), never queued without bound.
@@ -14,29 +14,37 @@ sleeps or starts a thread; the core is not thread-safe (a link runner serialises
   behind the FEATURES (`frame_stream`; dropped images counted in `frames_dropped`). The FEATURES limit
   grows by the frame budget, which the link's backlog may hold in chunks. With frames, `next_due_us` asks
   for one exposure at a time (a fast clock never outruns the images) and for an early look while chunks wait.
-- STIMULUS moves the simulated subject's target (`emulator.device.stimulus`).
+- STIMULUS moves the simulated subject's target (`eyehil.emulator.device.stimulus`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from emulator.device.camera import Camera, Selection
-from emulator.device.clock import Clock, RealTimeClock
-from emulator.device.frame_stream import FrameOptions, FrameStream
-from emulator.device.links import take
-from emulator.device.stimulus import stimulus_problem, stimulus_to_screen
-from emulator.device.subject import Subject
-from protocols.batch import pack_features_batch
-from protocols.enums import Capability, DeviceState, Eye, EyeSelect, StimulusFlags, StreamSelect
-from protocols.errors import ErrorCode
-from protocols.framing import encode_frame
-from protocols.header import MAX_PAYLOAD, PROTOCOL_VERSION, Header
-from protocols.messages import Configure, GetInfo, GetStatus, Ping, Start, Stimulus, Stop
-from protocols.native import HOST_TYPES, MAX_RATE_HZ, MIN_RATE_HZ, Message, check_configure, default_configure, encode
-from protocols.replies import Ack, DeviceInfo, ErrorReply, Pong, Status
-from protocols.samples import EYE_RECORD, FEATURES_HEAD, GLINT_RECORD
-from protocols.stream import NativeReceiver, Received, SequenceTracker
+from eyehil.emulator.device.camera import Camera, Selection
+from eyehil.emulator.device.clock import Clock, RealTimeClock
+from eyehil.emulator.device.frame_stream import FrameOptions, FrameStream
+from eyehil.emulator.device.links.base import take
+from eyehil.emulator.device.stimulus import stimulus_problem, stimulus_to_screen
+from eyehil.emulator.device.subject import Subject
+from eyehil.protocols.batch import pack_features_batch
+from eyehil.protocols.enums import Capability, DeviceState, Eye, EyeSelect, StimulusFlags, StreamSelect
+from eyehil.protocols.errors import ErrorCode
+from eyehil.protocols.framing import encode_frame
+from eyehil.protocols.header import MAX_PAYLOAD, PROTOCOL_VERSION, Header
+from eyehil.protocols.messages import Configure, GetInfo, GetStatus, Ping, Start, Stimulus, Stop
+from eyehil.protocols.native import (
+    HOST_TYPES,
+    MAX_RATE_HZ,
+    MIN_RATE_HZ,
+    Message,
+    check_configure,
+    default_configure,
+    encode,
+)
+from eyehil.protocols.replies import Ack, DeviceInfo, ErrorReply, Pong, Status
+from eyehil.protocols.samples import EYE_RECORD, FEATURES_HEAD, GLINT_RECORD
+from eyehil.protocols.stream import NativeReceiver, Received, SequenceTracker
 
 MODEL = "eyehil virtual tracker"
 FIRMWARE_VERSION = "0.1.0"

@@ -31,7 +31,7 @@ Modules (each effect is a subclass of `base.Effect` and registers itself by bein
 | screen_tilt           | model    | tilt_deg, yaw_deg (deg)            | the screen's orientation                     |
 | glint_occlusion       | features | bias                               | the pupil centre where a glint hides its edge|
 
-    from emulator.effects import Applied, get, simulate_with
+    from eyehil.emulator.effects import Applied, get, simulate_with
     noise = get("feature_noise")
     features = simulate_with(eyes, scene, [Applied.of(noise, sigma_px=0.1)], rng=np.random.default_rng(1))
 
@@ -45,10 +45,10 @@ import importlib
 import importlib.util
 import os
 
-from emulator.effects.base import REGISTRY, SESSIONS, Applied, Effect, Parameter
-from emulator.effects.run import sessions, simulate_with
+from eyehil.emulator.effects.base import REGISTRY, SESSIONS, Applied, Effect, Parameter
+from eyehil.emulator.effects.run import sessions, simulate_with
 
-MODULES: list[str] = [f"emulator.effects.{m}" for m in
+MODULES: list[str] = [f"eyehil.emulator.effects.{m}" for m in
                       ("noise", "pupil", "cornea", "subject", "scene", "camera", "geometry", "occlusion", "anatomy")]
 _loaded: set[str] = set()
 

@@ -2,11 +2,11 @@
 
 A user adds an effect by writing one subclass of `Effect` with a `name`: defining the class registers it
 (`Effect.__init_subclass__` -> `REGISTRY`), so it is in the catalogue as soon as its module is imported
-(`emulator.effects.MODULES` lists the catalogue's modules, `emulator.effects.load_module` adds one).
+(`eyehil.emulator.effects.MODULES` lists the catalogue's modules, `eyehil.emulator.effects.load_module` adds one).
 Every effect documents its physics, parameters with units and plausible range, a `prior` (typical value
 and spread in the population, for orientation and for drawing test strengths) and a `reference`.
 
-An effect acts at one or both of two stages of `simulate_with` (`emulator.effects.run`):
+An effect acts at one or both of two stages of `simulate_with` (`eyehil.emulator.effects.run`):
 
 - `apply(eyes, scene, values, session) -> (eyes, scene)`: before ray tracing, on the anatomy (an
   `EyeModel` batch) or on the scene (camera, head positions). `session` is "calibration" (head position 0)
@@ -34,9 +34,9 @@ from typing import ClassVar
 
 import numpy as np
 
-from emulator.eye.model import EyeModel
-from emulator.features import Features
-from emulator.scene import Scene
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.features import Features
+from eyehil.emulator.scene import Scene
 
 SESSIONS = ("calibration", "validation")
 REGISTRY: dict[str, type[Effect]] = {}

@@ -9,7 +9,7 @@ Frame: normalised camera coordinates (x, y) = ((u - cx) / fx, (v - cy) / fy) of 
 
 applied to the pupil-ellipse centre and every glint centre of every fixation (a feature-stage effect: the
 map is smooth at the scale of a pupil, so the distorted ellipse's centre is the distorted centre to
-first order). Radial distortion is `lens_distortion` (emulator.effects.scene), which acts in the ray
+first order). Radial distortion is `lens_distortion` (eyehil.emulator.effects.scene), which acts in the ray
 tracing. Scale: the Guestrin 2006 camera sees |x| <= 0.07; a displacement 2 p r^2 f is 0.05 px at r = 0.05
 for p = 1e-3 (f = 4667 px); what matters is its change across the pupil-glint vector.
 Reference: Brown 1966 (Photogramm. Eng. 32(3):444-462); Zhang 2000 (IEEE TPAMI 22(11):1330-1334).
@@ -18,7 +18,7 @@ Reference: Brown 1966 (Photogramm. Eng. 32(3):444-462); Zhang 2000 (IEEE TPAMI 2
 
 The camera's true orientation differs from the host's belief by `pitch_deg` (about world x; + tilts the
 view up) and `yaw_deg` (about world y; + turns the view toward +x), the named angles of
-`emulator.optics.camera` (the rotation is about the camera's nodal point). `CameraPose`: in every session
+`eyehil.emulator.optics.camera` (the rotation is about the camera's nodal point). `CameraPose`: in every session
 (a set-up measured wrong: the calibration absorbs most of it). `CameraBump`: only at the validation
 head positions (the camera knocked after calibration; nothing absorbs it).
 Reference: Guestrin & Eizenman 2006 (IEEE TBME 53(6):1124-1133, the geometry the host assumes known);
@@ -32,11 +32,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from emulator.effects.base import Effect, Parameter, with_arrays
-from emulator.eye.model import EyeModel
-from emulator.features import Features
-from emulator.optics.camera import orientation
-from emulator.scene import Scene
+from eyehil.emulator.effects.base import Effect, Parameter, with_arrays
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.features import Features
+from eyehil.emulator.optics.camera import orientation
+from eyehil.emulator.scene import Scene
 
 
 def tangential(points_px: np.ndarray, focal_px, principal_px, p1: float, p2: float) -> np.ndarray:
@@ -63,7 +63,7 @@ class TangentialDistortion(Effect):
 
     def perturb(self, features: Features, values: Mapping[str, float], rng: np.random.Generator | None,
                 **kwargs: object) -> Features:
-        from emulator.scene import load_scene
+        from eyehil.emulator.scene import load_scene
 
         camera = load_scene(features.scene).camera
         p1, p2 = float(values["p1"]), float(values["p2"])

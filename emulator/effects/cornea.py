@@ -31,9 +31,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from emulator.effects.base import Effect, Parameter
-from emulator.eye.model import EyeModel
-from emulator.scene import Scene
+from eyehil.emulator.effects.base import Effect, Parameter
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.scene import Scene
 
 MIN_CONIC = -0.95
 

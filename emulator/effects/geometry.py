@@ -1,7 +1,7 @@
 """The set-up's geometry as it really is: LEDs and screen not where the host believes.
 
-Frame: the scene frame of `emulator.scene` (mm; x to the subject's left, y up, z toward screen and
-camera). The host keeps the nominal scene (`analysis.bridge.tracker_geometry`), so these are errors of a
+Frame: the scene frame of `eyehil.emulator.scene` (mm; x to the subject's left, y up, z toward screen and
+camera). The host keeps the nominal scene (`eyehil.analysis.study.bridge.tracker_geometry`), so these are errors of a
 measured set-up.
 
 - `LedPosition`: every LED displaced by (dx, dy) mm. A model-based host computes the corneal centre from
@@ -27,9 +27,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from emulator.effects.base import Effect, Parameter
-from emulator.eye.model import EyeModel
-from emulator.scene import Scene, Screen
+from eyehil.emulator.effects.base import Effect, Parameter
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.scene import Scene, Screen
 
 REFERENCE = ("Guestrin & Eizenman 2006, IEEE TBME 53(6):1124-1133; Model & Eizenman 2010, IEEE TBME "
              "57(5):1031-1039; Barsingerhorn et al. 2018, Behav Res Methods 50:1776-1791")

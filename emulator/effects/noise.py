@@ -24,8 +24,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from emulator.effects.base import Effect, Parameter, with_arrays
-from emulator.features import Features
+from eyehil.emulator.effects.base import Effect, Parameter, with_arrays
+from eyehil.emulator.features import Features
 
 
 class FeatureNoise(Effect):

@@ -24,9 +24,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from emulator.effects.base import Effect, Parameter
-from emulator.eye.model import EyeModel
-from emulator.scene import Scene
+from eyehil.emulator.effects.base import Effect, Parameter
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.scene import Scene
 
 MIN_PUPIL_RADIUS_MM = 0.5
 LIMBUS_MARGIN_MM = 0.1

@@ -8,7 +8,7 @@ sessions' features are joined along the head axis (E, S, H, T, ...) in the scene
 effect's `perturb` acts on the features with the caller's Generator (and, for effects that set
 `needs_sensitivity`, their `sensitivity` of the same sessions, joined the same way).
 
-A scene's `extra["index_shift"]` (set by `emulator.effects.cornea.CornealIndex`) adds to the corneal and
+A scene's `extra["index_shift"]` (set by `eyehil.emulator.effects.cornea.CornealIndex`) adds to the corneal and
 aqueous refractive indices of the scene's media for that session.
 """
 
@@ -19,12 +19,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from emulator.effects.base import Applied, Effect
-from emulator.eye.media import Media
-from emulator.eye.model import EyeModel
-from emulator.features import Features
-from emulator.forward import simulate
-from emulator.scene import HeadPose, Scene
+from eyehil.emulator.effects.base import Applied, Effect
+from eyehil.emulator.eye.media import Media
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.features import Features
+from eyehil.emulator.forward import simulate
+from eyehil.emulator.scene import HeadPose, Scene
 
 Sensitivities = Mapping[str, dict[str, np.ndarray]]
 
@@ -38,7 +38,7 @@ def sessions(scene: Scene) -> list[tuple[str, tuple[HeadPose, ...]]]:
 
 def simulate_with(eyes: EyeModel, scene: Scene, applied: Sequence[Applied] = (), *,
                   rng: np.random.Generator | None = None, **kwargs) -> Features:
-    """Features of `eyes` in `scene` with `applied` effects; `kwargs` go to `emulator.forward.simulate`."""
+    """Features of `eyes` in `scene` with `applied` effects; `kwargs` go to `eyehil.emulator.forward.simulate`."""
     parts = [simulate_session(eyes, scene, applied, session, heads, **kwargs) for session, heads in sessions(scene)]
     needed = {a.effect.name: a.effect for a in applied if a.effect.needs_sensitivity}
     base = [a for a in applied if not a.effect.needs_sensitivity]
@@ -88,7 +88,7 @@ def perturb(features: Features, applied: Sequence[Applied], rng: np.random.Gener
     for a in applied:
         if a.effect.needs_sensitivity:
             if sensitivities is None or a.effect.name not in sensitivities:
-                raise ValueError(f"effect {a.effect.name!r} needs its sensitivity (emulator.effects.run.sensitivity)")
+                raise ValueError(f"effect {a.effect.name!r} needs its sensitivity (eyehil.emulator.effects.run.sensitivity)")
             features = a.effect.perturb(features, a.values, rng, sensitivity=sensitivities[a.effect.name])
         else:
             features = a.effect.perturb(features, a.values, rng)

@@ -5,9 +5,9 @@
 Radial lens distortion of the tracker's camera that the host does not correct.
 
 Frame: normalised camera coordinates x = X_c / Z_c (dimensionless, camera frame of
-`emulator.optics.camera`). The simulated camera maps x to x (1 + k1 r^2 + k2 r^4), r = |x|, before the
+`eyehil.emulator.optics.camera`). The simulated camera maps x to x (1 + k1 r^2 + k2 r^4), r = |x|, before the
 intrinsics (Brown 1966 / OpenCV radial model); this effect sets k1 and keeps the scene's k2. The host keeps
-its nominal pinhole geometry (`analysis.bridge.tracker_geometry` of the undistorted scene), as a tracker
+its nominal pinhole geometry (`eyehil.analysis.study.bridge.tracker_geometry` of the undistorted scene), as a tracker
 whose lens was never calibrated would.
 
 Scale: the Guestrin 2006 camera (f = 4667 px, 640 x 480 px) sees about +-0.07 in x; the right eye sits at
@@ -21,7 +21,7 @@ generous. Reference: D. C. Brown, "Decentering distortion of lenses", Photogramm
 
 Head roll at the validation head positions: the eye's torsion changes after calibration.
 
-Frame: the head pose of `emulator.scene.HeadPose` (roll about the scene z axis, deg). At every head
+Frame: the head pose of `eyehil.emulator.scene.HeadPose` (roll about the scene z axis, deg). At every head
 position but the first (the calibration position), the head is rolled by `roll_deg` in addition to its
 pose. The eyes follow Listing's law in the head frame, so they roll with the head; real eyes counter-roll
 by only about a tenth of a static head tilt (ocular counter-roll; Collewijn, Van der Steen, Ferman &
@@ -39,9 +39,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import replace
 
-from emulator.effects.base import Effect, Parameter
-from emulator.eye.model import EyeModel
-from emulator.scene import Scene
+from eyehil.emulator.effects.base import Effect, Parameter
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.scene import Scene
 
 
 class LensDistortion(Effect):

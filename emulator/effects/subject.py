@@ -37,11 +37,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from emulator.effects.base import Effect, Parameter, with_arrays
-from emulator.eye.model import EyeModel
-from emulator.features import Features
-from emulator.forward import simulate
-from emulator.scene import HeadPose, Scene
+from eyehil.emulator.effects.base import Effect, Parameter, with_arrays
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.features import Features
+from eyehil.emulator.forward import simulate
+from eyehil.emulator.scene import HeadPose, Scene
 
 KEYS = ("pupil_centre_px", "glint_px")
 FIXATION_STEP_MM = 2.0
@@ -49,7 +49,7 @@ HEAD_STEP_MM = 1.0
 
 
 def _media(scene: Scene):
-    from emulator.effects.run import media_of
+    from eyehil.emulator.effects.run import media_of
 
     return media_of(scene)
 

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from emulator.eye.model import EyeModel
-from emulator.eye.posterior import fovea_angles, rotation_centres
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.eye.posterior import fovea_angles, rotation_centres
 
 
 def eye_from_biometry(

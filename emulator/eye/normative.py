@@ -29,11 +29,11 @@ from typing import Any
 
 import numpy as np
 
-from emulator.eye.biometry import eye_from_biometry
-from emulator.eye.media import Media
-from emulator.eye.model import EyeModel
-from emulator.eye.population import eyes_from_raw
-from emulator.eye.rozema import rozema2011
+from eyehil.emulator.eye.biometry import eye_from_biometry
+from eyehil.emulator.eye.media import Media
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.eye.population import eyes_from_raw
+from eyehil.emulator.eye.rozema import rozema2011
 
 __all__ = ["NORMATIVE_NAMES", "normative_eye", "normative_media"]
 

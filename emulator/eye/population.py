@@ -23,9 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.eye.biometry import eye_from_biometry
-from emulator.eye.model import EyeModel
-from emulator.eye.rozema import RawDraws, RozemaModel, rozema2011, thick_lens_index
+from eyehil.emulator.eye.biometry import eye_from_biometry
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.eye.rozema import RawDraws, RozemaModel, rozema2011, thick_lens_index
 
 __all__ = [
     "REJECTION_REASONS",

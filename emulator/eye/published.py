@@ -27,9 +27,9 @@ from importlib import resources
 
 import numpy as np
 
-from emulator.eye.biometry import eye_from_biometry
-from emulator.eye.model import EyeModel
-from emulator.eye.rozema import rozema2011, thick_lens_index
+from eyehil.emulator.eye.biometry import eye_from_biometry
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.eye.rozema import rozema2011, thick_lens_index
 
 __all__ = ["HYPERBOLOID_CLIP", "STUDY_LENS_INDEX", "conditional_lens_power", "published_biometry", "published_eyes"]
 
@@ -40,7 +40,7 @@ _DATA_FILE = "fischer2023_eyes.csv"
 
 @lru_cache(maxsize=1)
 def _columns() -> dict[str, np.ndarray]:
-    text = resources.files("emulator").joinpath("data", _DATA_FILE).read_text(encoding="utf-8")
+    text = resources.files("eyehil.emulator").joinpath("data", _DATA_FILE).read_text(encoding="utf-8")
     rows = list(csv.reader(io.StringIO("".join(ln for ln in text.splitlines(True) if not ln.startswith("#")))))
     header, body = rows[0], np.array(rows[1:], dtype=float)
     columns = {name: body[:, i] for i, name in enumerate(header)}

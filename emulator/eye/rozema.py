@@ -95,7 +95,7 @@ class RozemaModel:
 @lru_cache(maxsize=1)
 def rozema2011() -> RozemaModel:
     """The published population (Rozema, Atchison & Tassignon 2011), from the embedded data file."""
-    text = resources.files("emulator").joinpath("data", "rozema2011.json").read_text(encoding="utf-8")
+    text = resources.files("eyehil.emulator").joinpath("data", "rozema2011.json").read_text(encoding="utf-8")
     doc = json.loads(text)
     params = doc["parameters"]
     covariance = np.array(doc["covariance"], dtype=float)

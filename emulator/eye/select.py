@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from emulator.eye.model import EyeModel
+from eyehil.emulator.eye.model import EyeModel
 
 
 def eyes_from_spec(spec: str, seed: int = 0) -> tuple[EyeModel, str]:
@@ -18,18 +18,18 @@ def eyes_from_spec(spec: str, seed: int = 0) -> tuple[EyeModel, str]:
     if kind.isdigit() and not arg:
         kind, arg = "sample", kind
     if kind == "published" and not arg:
-        from emulator.eye.published import published_eyes
+        from eyehil.emulator.eye.published import published_eyes
 
         return published_eyes(), "the 100 eyes of Fischer et al. 2023"
     if kind == "sample":
-        from emulator.eye.population import sample
+        from eyehil.emulator.eye.population import sample
 
         if not arg.isdigit() or int(arg) <= 0:
             raise ValueError(f"eyes spec {spec!r}: sample needs a positive count, e.g. sample:100")
         draw = sample(int(arg), np.random.default_rng(seed))
         return draw.eyes, f"Rozema 2011 population, seed {seed}: {draw.summary()}"
     if kind == "normative" and arg:
-        from emulator.eye.normative import normative_eye
+        from eyehil.emulator.eye.normative import normative_eye
 
         return normative_eye(arg).as_batch(), f"normative eye {arg}"
     raise ValueError(f"eyes spec {spec!r}: use 'published', 'sample:N' or 'normative:NAME'")

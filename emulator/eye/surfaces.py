@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from emulator.eye.media import Media
-from emulator.eye.model import EyeModel
-from emulator.eye.posterior import retina_centre_depth, retina_semi_axes
-from emulator.optics.conic import Conic, Plane
-from emulator.optics.pupil import CorneaOptics
+from eyehil.emulator.eye.media import Media
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.eye.posterior import retina_centre_depth, retina_semi_axes
+from eyehil.emulator.optics.conic import Conic, Plane
+from eyehil.emulator.optics.pupil import CorneaOptics
 
 LENS_APERTURE_MM = 4.5
 

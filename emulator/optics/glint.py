@@ -20,9 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.optics.conic import Conic
-from emulator.optics.newton import newton2d
-from emulator.optics.rays import _dot, distance_to_line, reflect, unit
+from eyehil.emulator.optics.conic import Conic
+from eyehil.emulator.optics.newton import newton2d
+from eyehil.emulator.optics.rays import _dot, distance_to_line, reflect, unit
 
 GLINT_TOLERANCE_MM = 1e-4
 

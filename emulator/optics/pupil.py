@@ -22,9 +22,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.optics.conic import Conic, Plane
-from emulator.optics.newton import newton2d
-from emulator.optics.rays import _dot, refract, unit
+from eyehil.emulator.optics.conic import Conic, Plane
+from eyehil.emulator.optics.newton import newton2d
+from eyehil.emulator.optics.rays import _dot, refract, unit
 
 PUPIL_TOLERANCE_MM = 1e-6
 

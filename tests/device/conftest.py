@@ -27,7 +27,7 @@ def no_leaks() -> Iterator[None]:
 def device_url(request: pytest.FixtureRequest) -> Iterator[Callable[..., str]]:
     """A factory: device_url(**options) -> the URL of a fresh emulator on this test's backend.
 
-    Options are `emulator.device.build.options_from_query` keys (scene, rate, clock, latency, ...);
+    Options are `eyehil.emulator.device.build.options_from_query` keys (scene, rate, clock, latency, ...);
     the clock defaults to fast. Every emulator started is closed after the test.
     """
     closers: list[Callable[[], None]] = []

@@ -6,13 +6,13 @@ import threading
 from collections.abc import Callable
 from urllib.parse import urlencode
 
-from emulator.device.build import DeviceOptions, build_device, options_from_query
-from emulator.device.links import LinkRunner
-from protocols.native import DEVICE_TYPES, Message, encode
-from protocols.stream import NativeReceiver, Received
+from eyehil.emulator.device.build import DeviceOptions, build_device, options_from_query
+from eyehil.emulator.device.links.base import LinkRunner
+from eyehil.protocols.native import DEVICE_TYPES, Message, encode
+from eyehil.protocols.stream import NativeReceiver, Received
 
-LINK_CLASSES = {"pty": "emulator.device.pty_link:PtyLink", "tcp": "emulator.device.tcp_link:TcpLink",
-                "usbip": "emulator.device.usbip_link:UsbipLink"}
+LINK_CLASSES = {"pty": "eyehil.emulator.device.links.pty:PtyLink", "tcp": "eyehil.emulator.device.links.tcp:TcpLink",
+                "usbip": "eyehil.emulator.device.links.usbip.link:UsbipLink"}
 
 
 def query(**options: object) -> str:

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from device_helpers import CoreHost, DeadLink, FrameFilter, core_device, start_emulator
 
-from drivers.client import Tracker, open_tracker
-from drivers.errors import TrackerTimeoutError
-from drivers.links import open_link
-from protocols import ErrorCode, ErrorReply, GetInfo, GetStatus, Start, encode
-from protocols.cobs import encode as cobs_encode
-from protocols.header import pack_frame
+from eyehil.drivers.client import Tracker, open_tracker
+from eyehil.drivers.errors import TrackerTimeoutError
+from eyehil.drivers.links import open_link
+from eyehil.protocols import ErrorCode, ErrorReply, GetInfo, GetStatus, Start, encode
+from eyehil.protocols.cobs import encode as cobs_encode
+from eyehil.protocols.header import pack_frame
 
 
 @pytest.fixture
@@ -73,7 +73,7 @@ def test_refused_frames_get_an_error_naming_them(host: CoreHost, frame: bytes, c
 def test_payload_length_field_disagreeing_is_malformed(host: CoreHost) -> None:
     frame = bytearray(pack_frame(GetInfo.TYPE, 4, 0, b"\x00\x00"))
     frame[16] = 5  # payload_len 5, two bytes present
-    from protocols.crc import crc16
+    from eyehil.protocols.crc import crc16
 
     frame[-2:] = crc16(bytes(frame[:-2])).to_bytes(2, "little")
     host.core.feed(cobs_encode(bytes(frame)) + b"\x00")

@@ -15,16 +15,16 @@ import numpy as np
 import pytest
 from device_helpers import start_emulator
 
-from analysis.bridge import tracker_geometry
-from drivers.calibration import Plan, _subset, calibrate, estimator_for, validation_errors_deg
-from drivers.client import open_tracker
-from drivers.gaze.base import BinocularSamples, EyeSamples
-from drivers.setup_file import load_geometry
-from emulator.device.setup_file import write_geometry
-from emulator.eye.select import eyes_from_spec
-from emulator.forward import simulate
-from emulator.scene import HeadPose, load_scene
-from protocols import Eye
+from eyehil.analysis.study.bridge import tracker_geometry
+from eyehil.drivers.calibration import Plan, _subset, calibrate, estimator_for, validation_errors_deg
+from eyehil.drivers.client import open_tracker
+from eyehil.drivers.gaze.base import BinocularSamples, EyeSamples
+from eyehil.drivers.setup_file import load_geometry
+from eyehil.emulator.device.setup_file import write_geometry
+from eyehil.emulator.eye.select import eyes_from_spec
+from eyehil.emulator.forward import simulate
+from eyehil.emulator.scene import HeadPose, load_scene
+from eyehil.protocols import Eye
 
 EYES, EYE = "published", 17  # one of the published study's eyes (the most sensitive to rounding, see above)
 TOLERANCE_DEG = 0.05

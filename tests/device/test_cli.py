@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 from device_helpers import query
 
-from drivers.recording import read_recording
-from eyehil_cli import main
+from eyehil.cli import main
+from eyehil.drivers.recording import read_recording
 
 
 @pytest.fixture

@@ -6,14 +6,14 @@ from __future__ import annotations
 import numpy as np
 from device_helpers import CoreHost, core_device, query, start_emulator
 
-from drivers.client import open_tracker
-from drivers.frames import FrameReader
-from emulator.device.appearance import AppearanceSolver
-from emulator.device.solver import FeatureSolver
-from emulator.eye.normative import normative_eye
-from emulator.scene import load_scene
-from eyehil_cli import main
-from protocols import (
+from eyehil.cli import main
+from eyehil.drivers.client import open_tracker
+from eyehil.drivers.frames import FrameReader
+from eyehil.emulator.device.appearance import AppearanceSolver
+from eyehil.emulator.device.solver import FeatureSolver
+from eyehil.emulator.eye.normative import normative_eye
+from eyehil.emulator.scene import load_scene
+from eyehil.protocols import (
     Ack,
     Capability,
     Configure,

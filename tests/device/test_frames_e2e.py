@@ -17,16 +17,16 @@ import pytest
 from device_helpers import query, start_emulator
 from test_calibration_e2e import EYE, EYES, _offline
 
-from drivers.calibration import Plan, calibrate
-from drivers.client import open_tracker
-from drivers.detect import detect_eye
-from drivers.frames import FrameReader
-from drivers.setup_file import load_geometry
-from emulator.device.build import build_subject, options_from_query
-from emulator.device.frames import ExposureRenderer, exposure_rng, render_exposure
-from emulator.device.setup_file import write_geometry
-from emulator.scene import load_scene
-from protocols import Eye, GlintFlags, PupilFlags, StreamSelect
+from eyehil.drivers.calibration import Plan, calibrate
+from eyehil.drivers.client import open_tracker
+from eyehil.drivers.detect import detect_eye
+from eyehil.drivers.frames import FrameReader
+from eyehil.drivers.setup_file import load_geometry
+from eyehil.emulator.device.build import build_subject, options_from_query
+from eyehil.emulator.device.frames import ExposureRenderer, exposure_rng, render_exposure
+from eyehil.emulator.device.setup_file import write_geometry
+from eyehil.emulator.scene import load_scene
+from eyehil.protocols import Eye, GlintFlags, PupilFlags, StreamSelect
 
 BACKENDS = ["pty", "tcp", "usbip"]
 TOLERANCE_PX = 0.1  # RMS, pupil centre and glints

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import serial
 
-from drivers.client import open_tracker
-from drivers.links import open_link
-from drivers.links.spy import SpyLink
-from protocols import DeviceState, EyeSelect
-from protocols.iscan import IscanCommand, IscanParser
+from eyehil.drivers.client import open_tracker
+from eyehil.drivers.links import open_link
+from eyehil.drivers.links.spy import SpyLink
+from eyehil.protocols import DeviceState, EyeSelect
+from eyehil.protocols.iscan import IscanCommand, IscanParser
 
 
 def test_handshake_and_info(device_url) -> None:
@@ -70,7 +70,7 @@ def test_spy_dumps_both_directions(device_url) -> None:
     out = io.StringIO()
     url = device_url()
     link = SpyLink(open_link(url, timeout=0.0), out)
-    from drivers.client import Tracker
+    from eyehil.drivers.client import Tracker
 
     with Tracker(link) as tracker:
         tracker.status()
@@ -97,7 +97,7 @@ def test_iscan_mode(device_url) -> None:
 
 
 def test_open_errors_are_link_errors() -> None:
-    from drivers.errors import LinkError, SchemeUnavailableError
+    from eyehil.drivers.errors import LinkError, SchemeUnavailableError
 
     with pytest.raises(SchemeUnavailableError):
         open_link("nonsense://x")
@@ -111,7 +111,7 @@ def test_open_errors_are_link_errors() -> None:
 def test_tcp_device_serves_pyserial_socket_urls() -> None:
     from device_helpers import start_emulator
 
-    from drivers.client import Tracker
+    from eyehil.drivers.client import Tracker
 
     url, close = start_emulator("tcp", rate=200)
     try:

@@ -7,7 +7,7 @@ import sys
 
 USER_TESTS = '''
 import pytest
-from drivers.client import open_tracker
+from eyehil.drivers.client import open_tracker
 
 
 def test_default_device_on_a_pty(eyehil_url, eyehil_emulator):
@@ -30,7 +30,7 @@ def test_marker_options(eyehil_url, eyehil_geometry, eyehil_options):
 def test_plugin_serves_user_tests(tmp_path) -> None:
     (tmp_path / "test_user.py").write_text(USER_TESTS)
     cmd = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "no:eyehil",
-           "-p", "emulator.device.pytest_plugin", "test_user.py"]
+           "-p", "eyehil.emulator.device.pytest_plugin", "test_user.py"]
     result = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stdout + result.stderr
     assert "2 passed" in result.stdout

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from device_helpers import query
 
-from analysis.bridge import tracker_geometry
-from drivers.client import open_tracker
-from drivers.recording import Recorder, RecordingError, read_recording
-from drivers.setup_file import load_geometry
-from emulator.device.setup_file import write_geometry
-from emulator.scene import load_scene
+from eyehil.analysis.study.bridge import tracker_geometry
+from eyehil.drivers.client import open_tracker
+from eyehil.drivers.recording import Recorder, RecordingError, read_recording
+from eyehil.drivers.setup_file import load_geometry
+from eyehil.emulator.device.setup_file import write_geometry
+from eyehil.emulator.scene import load_scene
 
 
 def _record(path, count: int = 300) -> tuple[list, list[int]]:

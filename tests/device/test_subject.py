@@ -5,15 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drivers.calibration import screen_to_stimulus as host_to_stimulus
-from drivers.gaze.geometry import Screen as HostScreen
-from emulator.device.gaze import Blink, Fixation, Kind, Pursuit, Saccade, Timeline, plan, saccade_duration_s
-from emulator.device.solver import FeatureSolver, ellipse_from_moments, ellipse_to_moments
-from emulator.device.stimulus import screen_to_stimulus, stimulus_to_screen
-from emulator.device.subject import Behaviour, Subject
-from emulator.eye.normative import normative_eye
-from emulator.forward import simulate
-from emulator.scene import load_scene
+from eyehil.drivers.calibration import screen_to_stimulus as host_to_stimulus
+from eyehil.drivers.gaze.geometry import Screen as HostScreen
+from eyehil.emulator.device.gaze import Blink, Fixation, Kind, Pursuit, Saccade, Timeline, plan, saccade_duration_s
+from eyehil.emulator.device.solver import FeatureSolver, ellipse_from_moments, ellipse_to_moments
+from eyehil.emulator.device.stimulus import screen_to_stimulus, stimulus_to_screen
+from eyehil.emulator.device.subject import Behaviour, Subject
+from eyehil.emulator.eye.normative import normative_eye
+from eyehil.emulator.forward import simulate
+from eyehil.emulator.scene import load_scene
 
 
 @pytest.fixture(scope="module")

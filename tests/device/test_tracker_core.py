@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from device_helpers import CoreHost, core_device
 
-from protocols import (
+from eyehil.protocols import (
     Ack,
     Capability,
     Configure,

@@ -1,7 +1,7 @@
 """Helpers of the firmware-in-the-loop tests: build the C firmware, run it on a pseudo-terminal in front of the
 Python sensor, and exchange raw bytes with a device.
 
-`FirmwareRig` is one running firmware: its sensor (`emulator.device.firmware_sensor`, served in this process),
+`FirmwareRig` is one running firmware: its sensor (`eyehil.emulator.device.firmware_sensor`, served in this process),
 the firmware process (`eyehil-firmware --pty --sensor SOCKET`, whose first stdout line is ``url: /dev/pts/N``)
 and that URL, which the host driver opens. `close` stops both and checks the firmware exited cleanly.
 """
@@ -17,10 +17,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import urlencode
 
-from emulator.device.build import options_from_query
-from emulator.device.firmware_sensor import FirmwareSensor, SensorServer
-from protocols.native import DEVICE_TYPES
-from protocols.stream import NativeReceiver, Received
+from eyehil.emulator.device.build import options_from_query
+from eyehil.emulator.device.firmware_sensor import FirmwareSensor, SensorServer
+from eyehil.protocols.native import DEVICE_TYPES
+from eyehil.protocols.stream import NativeReceiver, Received
 
 ROOT = Path(__file__).resolve().parents[2]
 SOURCES = ROOT / "firmware_stubs"
@@ -71,7 +71,7 @@ class FirmwareRig:
     """A sensor and a firmware process joined on a Unix socket; the firmware's UART is a pseudo-terminal."""
 
     def __init__(self, binary: Path, **options: object) -> None:
-        """Start both; `options` are `emulator.device.build.options_from_query` keys (scene, eye, script ...)."""
+        """Start both; `options` are `eyehil.emulator.device.build.options_from_query` keys (scene, eye, script ...)."""
         self._dir = Path(tempfile.mkdtemp(prefix="eyehil-fw-"))  # short: socket paths are limited to 107 bytes
         self.log = self._dir / "firmware.log"
         self.sensor = FirmwareSensor.from_options(options_from_query(urlencode(options)))

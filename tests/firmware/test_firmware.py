@@ -4,7 +4,7 @@ pseudo-terminal and its camera backed by the emulator's sensor; the host driver 
 - its codecs pass the unit tests against the golden wire vectors;
 - handshake, CONFIGURE, START, FEATURES, STOP: the features equal those the Python device's camera computes for
   the same exposures, to the float32 the wire carries;
-- CONFIGURE is refused exactly as `protocols.native.check_configure` refuses it;
+- CONFIGURE is refused exactly as `eyehil.protocols.native.check_configure` refuses it;
 - bad input (garbage, wrong CRC, unknown types, wrong versions, short payloads ...) gets the same answers and
   counters from the C firmware as from the Python `VirtualTracker`;
 - STIMULUS reaches the simulated subject, and a position the emulator cannot show is refused.
@@ -18,18 +18,18 @@ import numpy as np
 import pytest
 from firmware_helpers import GOLDEN, exchange_raw
 
-from drivers.client import Tracker, open_tracker
-from drivers.errors import CommandRefusedError
-from drivers.links import open_link
-from emulator.device.build import build_device, build_subject, options_from_query
-from emulator.device.camera import Camera, Selection
-from protocols import Configure, ErrorCode, ErrorReply, GetInfo, GetStatus, Start, Stop, encode
-from protocols.cobs import encode as cobs_encode
-from protocols.crc import crc16
-from protocols.enums import Capability, DeviceState, Eye, EyeSelect, StreamSelect
-from protocols.header import MessageType, pack_frame
-from protocols.native import DEVICE_TYPES, check_configure
-from protocols.stream import NativeReceiver, Received
+from eyehil.drivers.client import Tracker, open_tracker
+from eyehil.drivers.errors import CommandRefusedError
+from eyehil.drivers.links import open_link
+from eyehil.emulator.device.build import build_device, build_subject, options_from_query
+from eyehil.emulator.device.camera import Camera, Selection
+from eyehil.protocols import Configure, ErrorCode, ErrorReply, GetInfo, GetStatus, Start, Stop, encode
+from eyehil.protocols.cobs import encode as cobs_encode
+from eyehil.protocols.crc import crc16
+from eyehil.protocols.enums import Capability, DeviceState, Eye, EyeSelect, StreamSelect
+from eyehil.protocols.header import MessageType, pack_frame
+from eyehil.protocols.native import DEVICE_TYPES, check_configure
+from eyehil.protocols.stream import NativeReceiver, Received
 
 RATE_HZ = 500
 SCENES = {  # scene -> (sensor px, LEDs, eyes seen)
@@ -63,7 +63,7 @@ def test_handshake_reports_the_emulated_camera(rig, scene: str) -> None:
 
 
 def _reference(options: dict, frame_ids: np.ndarray, t0_us: int, eyes: tuple[Eye, ...], leds: int):
-    """What the Python device's camera (`emulator.device.camera.Camera`) reports for exposures `frame_ids` of a
+    """What the Python device's camera (`eyehil.emulator.device.camera.Camera`) reports for exposures `frame_ids` of a
     stream started at `t0_us` on a fresh subject."""
     scene_sensor, _, tracked = SCENES[options["scene"]]
     camera = Camera(build_subject(options_from_query("&".join(f"{k}={v}" for k, v in options.items())),

@@ -10,11 +10,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drivers.calibration import Plan, calibrate
-from drivers.client import open_tracker
-from drivers.setup_file import load_geometry
-from emulator.device.setup_file import write_geometry
-from emulator.scene import load_scene
+from eyehil.drivers.calibration import Plan, calibrate
+from eyehil.drivers.client import open_tracker
+from eyehil.drivers.setup_file import load_geometry
+from eyehil.emulator.device.setup_file import write_geometry
+from eyehil.emulator.scene import load_scene
 
 EYES, EYE = "published", 17  # the eye tests/device/test_calibration_e2e.py uses (the most sensitive to rounding)
 RATE_HZ = 500

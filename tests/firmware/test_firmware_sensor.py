@@ -1,4 +1,4 @@
-"""The Python side of the firmware's sensor link (`emulator.device.firmware_sensor`), without a C compiler: the
+"""The Python side of the firmware's sensor link (`eyehil.emulator.device.firmware_sensor`), without a C compiler: the
 line protocol, the socket server and its command line."""
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from emulator.device.build import DeviceOptions
-from emulator.device.firmware_sensor import FirmwareSensor, SensorServer
+from eyehil.emulator.device.build import DeviceOptions
+from eyehil.emulator.device.firmware_sensor import FirmwareSensor, SensorServer
 
 
 @pytest.fixture
@@ -81,7 +81,7 @@ def test_server_answers_one_connection_after_another(sensor: FirmwareSensor) -> 
 def test_command_line_serves_until_sigterm() -> None:
     with tempfile.TemporaryDirectory(prefix="eyehil-") as tmp:
         path = Path(tmp) / "s.sock"
-        process = subprocess.Popen([sys.executable, "-m", "emulator.device.firmware_sensor", "--socket", str(path),
+        process = subprocess.Popen([sys.executable, "-m", "eyehil.emulator.device.firmware_sensor", "--socket", str(path),
                                     "--scene", "guestrin2006"], stdout=subprocess.PIPE, text=True)
         try:
             assert select.select([process.stdout], [], [], 30)[0]

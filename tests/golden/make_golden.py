@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from protocols import (
+from eyehil.protocols import (
     Ack,
     Capability,
     Configure,
@@ -49,7 +49,7 @@ from protocols import (
     encode,
     encode_raw,
 )
-from protocols.iscan import encode_samples
+from eyehil.protocols.iscan import encode_samples
 
 HERE = Path(__file__).resolve().parent
 _RIGHT = EyeFeatures(

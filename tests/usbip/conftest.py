@@ -13,8 +13,8 @@ import pytest
 from leaks import leak_check
 from usbip_helpers import Collector, RawHost
 
-from drivers.links.usbip import UsbipSerial
-from emulator.device.usbip_server import UsbipCdcServer
+from eyehil.drivers.links.usbip import UsbipSerial
+from eyehil.emulator.device.links.usbip.server import UsbipCdcServer
 
 
 @pytest.fixture(autouse=True)

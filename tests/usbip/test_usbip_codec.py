@@ -6,7 +6,7 @@ import struct
 
 import pytest
 
-from protocols.usbip import (
+from eyehil.protocols.usbip.messages import (
     USB_DEVICE,
     OpCode,
     OpHeader,
@@ -19,7 +19,7 @@ from protocols.usbip import (
     encode_import_reply,
     encode_import_request,
 )
-from protocols.usbip_urb import (
+from eyehil.protocols.usbip.urb import (
     URB_UNLINKED,
     CmdSubmit,
     CmdUnlink,

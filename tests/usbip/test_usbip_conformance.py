@@ -20,7 +20,7 @@ import pytest
 import serial
 from usbip_helpers import Collector
 
-from emulator.device.usbip_server import UsbipCdcServer
+from eyehil.emulator.device.links.usbip.server import UsbipCdcServer
 
 USBIP = shutil.which("usbip", path=os.pathsep.join([os.environ.get("PATH", ""), "/usr/sbin", "/sbin"]))
 needs_usbip = pytest.mark.skipif(USBIP is None, reason="the usbip tool is not installed (apt-get install usbip)")

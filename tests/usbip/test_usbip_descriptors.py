@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from emulator.device.usbip_control import CdcAcmControl
-from protocols.usb_descriptors import (
+from eyehil.emulator.device.links.usbip.control import CdcAcmControl
+from eyehil.protocols.usbip.descriptors import (
     CdcAcmDescriptors,
     CdcEndpoints,
     DescriptorType,

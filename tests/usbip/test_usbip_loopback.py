@@ -9,10 +9,10 @@ import pytest
 import serial
 from usbip_helpers import Collector
 
-from drivers.links.usbip import UsbipSerial
-from drivers.links.usbip_client import UsbipClient, UsbipLinkError, list_devices
-from emulator.device.usbip_server import UsbipCdcServer
-from protocols.usb_descriptors import LineCoding
+from eyehil.drivers.links.usbip import UsbipSerial
+from eyehil.drivers.links.usbip_client import UsbipClient, UsbipLinkError, list_devices
+from eyehil.emulator.device.links.usbip.server import UsbipCdcServer
+from eyehil.protocols.usbip.descriptors import LineCoding
 
 MEGABYTE = random.Random(1).randbytes(1 << 20)
 

@@ -7,12 +7,12 @@ import struct
 import pytest
 from usbip_helpers import Collector, RawHost, wait_closed
 
-from drivers.links.usbip import UsbipSerial
-from drivers.links.usbip_client import list_devices
-from emulator.device.usbip_server import UsbipCdcServer
-from emulator.device.usbip_session import MAX_TRANSFER
-from protocols.usbip import OpCode, OpHeader
-from protocols.usbip_urb import CmdSubmit, Direction, RetSubmit
+from eyehil.drivers.links.usbip import UsbipSerial
+from eyehil.drivers.links.usbip_client import list_devices
+from eyehil.emulator.device.links.usbip.server import UsbipCdcServer
+from eyehil.emulator.device.links.usbip.session import MAX_TRANSFER
+from eyehil.protocols.usbip.messages import OpCode, OpHeader
+from eyehil.protocols.usbip.urb import CmdSubmit, Direction, RetSubmit
 
 DEVID = 0x00010002
 

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from usbip_helpers import Collector, RawHost
 
-from emulator.device.usbip_server import UsbipCdcServer
-from protocols.usb_descriptors import device_descriptor
-from protocols.usbip import OpStatus
-from protocols.usbip_urb import URB_STALL, URB_UNLINKED, CmdSubmit, CmdUnlink, Direction, RetSubmit, RetUnlink
+from eyehil.emulator.device.links.usbip.server import UsbipCdcServer
+from eyehil.protocols.usbip.descriptors import device_descriptor
+from eyehil.protocols.usbip.messages import OpStatus
+from eyehil.protocols.usbip.urb import URB_STALL, URB_UNLINKED, CmdSubmit, CmdUnlink, Direction, RetSubmit, RetUnlink
 
 DEVID = 0x00010002
 IN, OUT = Direction.IN, Direction.OUT

@@ -6,8 +6,8 @@ import socket
 import threading
 import time
 
-from protocols.usbip import OP_HEADER, USB_DEVICE, OpHeader, encode_import_request
-from protocols.usbip_urb import URB_HEADER_SIZE, RetSubmit, UrbMessage, decode_urb_header
+from eyehil.protocols.usbip.messages import OP_HEADER, USB_DEVICE, OpHeader, encode_import_request
+from eyehil.protocols.usbip.urb import URB_HEADER_SIZE, RetSubmit, UrbMessage, decode_urb_header
 
 
 class Collector:

@@ -15,7 +15,7 @@ import zmq
 from leaks import leak_check
 from zmq_helpers import start_server
 
-from emulator.device.zmq_server import PupilServer
+from eyehil.emulator.device.pupil.server import PupilServer
 
 CLIENT_TIMEOUT_MS = 10_000
 

@@ -8,7 +8,7 @@ import math
 import pytest
 from zmq_helpers import eventually
 
-from emulator.device.lsl_outlet import LslUnavailableError, gaze_channels, load_pylsl
+from eyehil.emulator.device.lsl import LslUnavailableError, gaze_channels, load_pylsl
 
 try:
     pylsl = load_pylsl()

@@ -12,7 +12,7 @@ import pytest
 from pupil_labs.pupil_core_network_client import Device
 from zmq_helpers import eventually, subscribed, topic_is, wait_for
 
-from protocols.pupil import VERSION
+from eyehil.protocols.pupil import VERSION
 
 
 @pytest.fixture

@@ -12,9 +12,9 @@ import zmq
 from pupil_labs.pupil_core_network_client import Device
 from zmq_helpers import eventually, start_server
 
-from emulator.device.build import DeviceOptions, build_subject
-from emulator.device.zmq_server import PupilServer, ServerOptions
-from protocols.pupil import MAX_PAYLOAD_BYTES
+from eyehil.emulator.device.build import DeviceOptions, build_subject
+from eyehil.emulator.device.pupil.server import PupilServer, ServerOptions
+from eyehil.protocols.pupil import MAX_PAYLOAD_BYTES
 
 
 def _nested(depth: int) -> bytes:

@@ -115,7 +115,7 @@ def _free_port() -> int:
 
 def test_command_line_emulator() -> None:
     port = _free_port()
-    cmd = [sys.executable, "-m", "eyehil_cli", "emulate", "--link", "zmq", "--port", str(port), "--duration", "60"]
+    cmd = [sys.executable, "-m", "eyehil.cli", "emulate", "--link", "zmq", "--port", str(port), "--duration", "60"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
     try:
         assert proc.stdout.readline().strip() == f"url: tcp://127.0.0.1:{port}"

@@ -7,15 +7,15 @@ import cv2
 import numpy as np
 import pytest
 
-from emulator.device.build import DeviceOptions, build_subject
-from emulator.device.camera import Camera, Selection
-from emulator.device.clock import FastClock
-from emulator.device.zmq_calibration import MAX_TARGETS, Session, fit, norm_to_screen, screen_to_norm
-from emulator.device.zmq_capture import Capture
-from emulator.device.zmq_datums import EyeWindow, PupilTime, exposure_datums, eye_windows
-from emulator.device.zmq_frames import encode_image
-from emulator.scene import load_scene
-from protocols.enums import Eye
+from eyehil.emulator.device.build import DeviceOptions, build_subject
+from eyehil.emulator.device.camera import Camera, Selection
+from eyehil.emulator.device.clock import FastClock
+from eyehil.emulator.device.pupil.calibration import MAX_TARGETS, Session, fit, norm_to_screen, screen_to_norm
+from eyehil.emulator.device.pupil.capture import Capture
+from eyehil.emulator.device.pupil.datums import EyeWindow, PupilTime, exposure_datums, eye_windows
+from eyehil.emulator.device.pupil.frames import encode_image
+from eyehil.emulator.scene import load_scene
+from eyehil.protocols.enums import Eye
 
 GUESTRIN_SCREEN = (377.0, 301.0)
 

@@ -8,9 +8,9 @@ from typing import Any
 
 from pupil_labs.pupil_core_network_client import Device
 
-from emulator.device.build import DeviceOptions, build_subject
-from emulator.device.subject import Behaviour
-from emulator.device.zmq_server import PupilServer, ServerOptions
+from eyehil.emulator.device.build import DeviceOptions, build_subject
+from eyehil.emulator.device.pupil.server import PupilServer, ServerOptions
+from eyehil.emulator.device.subject import Behaviour
 
 _DEVICE_KEYS = {"scene", "eyes", "eye", "sides", "seed"}
 

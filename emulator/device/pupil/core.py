@@ -1,0 +1,174 @@
+"""The device thread of the ZeroMQ facade: exposures become datums on the backbone; notifications steer it.
+
+One thread ("eyehil-zmq-publisher") owns the camera (`eyehil.emulator.device.camera`), the subject's plan, the
+`zmq_capture.Capture` state and two sockets: a PUB connected to the backbone's XSUB (everything this thread
+publishes) and a SUB connected to its XPUB, subscribed to ``notify.`` and ``annotation`` (notifications and
+annotations from Pupil Remote and from clients publishing directly). It wakes at each exposure's
+mid-exposure time (device clock; waits under a millisecond use an event's timeout, not the socket poll) and
+whenever a message arrives, and per exposure publishes ``pupil.<id>.2d`` and ``glint.<id>`` of every tracked
+eye (`zmq_datums`), hands every k-th exposure to the frame thread (`zmq_frames`), and queues it for gaze
+mapping (`zmq_gaze`) and the LSL outlet. Falling more than `MAX_BEHIND_S` behind, it skips the excess
+exposures (counted in ``exposures_skipped``) instead of bursting them.
+
+Malformed messages from the backbone (`eyehil.protocols.pupil.unpack` refuses them) are dropped and counted.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections import Counter
+from typing import Any
+
+import numpy as np
+import zmq
+
+from eyehil.emulator.device.camera import Camera, Exposures, Selection
+from eyehil.emulator.device.clock import Clock
+from eyehil.emulator.device.pupil.capture import Capture
+from eyehil.emulator.device.pupil.datums import EyeWindow, PupilTime, exposure_datums, sample_arrays
+from eyehil.emulator.device.pupil.frames import FramePublisher
+from eyehil.emulator.device.pupil.gaze import BATCH_S, GazeStream
+from eyehil.emulator.device.subject import Subject
+from eyehil.protocols.enums import Eye
+from eyehil.protocols.pupil import PupilMessageError, pack, unpack
+
+MAX_BEHIND_S = 0.25
+IDLE_S = 0.05
+DRAIN = 256  # messages handled per wake-up at most
+
+
+class DeviceThread:
+    """See the module docstring; `start`, then `close` (joins the thread, closes its sockets)."""
+
+    def __init__(self, context: zmq.Context, endpoint: str, sub: zmq.Socket, subject: Subject, clock: Clock,
+                 time: PupilTime, windows: list[EyeWindow], capture: Capture, *, rate_hz: int,
+                 frames: FramePublisher | None = None, frame_every: int = 1, outlet: Any = None,
+                 hwm: int = 1000) -> None:
+        """Publish to the XSUB at `endpoint`; `sub`: the SUB already connected and subscribed (the server
+        checked that messages reach it)."""
+        scene = subject.solver.scene
+        self.subject, self.clock, self.time, self.windows = subject, clock, time, windows
+        self.capture, self.frames, self.frame_every, self.outlet = capture, frames, frame_every, outlet
+        self.rate_hz = rate_hz
+        tracked = tuple(Eye(w.eye_id) for w in windows)
+        self.camera = Camera(subject, tuple(int(v) for v in scene.camera.resolution_px), tracked)
+        self._selection = Selection(tracked, len(scene.leds))
+        self.gaze = GazeStream(windows, time, scene.screen.size)
+        self.counters: Counter[str] = Counter()
+        self.failure: Exception | None = None
+        self._sub = sub
+        self._pub = context.socket(zmq.PUB)
+        self._pub.setsockopt(zmq.LINGER, 0)
+        self._pub.setsockopt(zmq.SNDHWM, hwm)
+        self._pub.connect(endpoint)
+        self._poller = zmq.Poller()
+        self._poller.register(sub, zmq.POLLIN)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="eyehil-zmq-publisher", daemon=True)
+
+    def show(self, screen_mm: tuple[float, float], t_us: int) -> None:
+        """The subject looks at `screen_mm` from device time `t_us` (the `Capture`'s stand-in for the screen)."""
+        self.camera.invalidate(self.subject.look_at(screen_mm, t_us))
+
+    def start(self) -> None:
+        """Start exposing now and the thread."""
+        self.camera.start(self.clock.now_us(), self.rate_hz, self._selection)
+        self._thread.start()
+
+    # --- the loop ----------------------------------------------------------------------------
+    def _run(self) -> None:
+        try:
+            while not self._stop.is_set():
+                self._receive(self._wait_s())
+                self._emit()
+                if self.gaze.due(self.clock.now_us()):
+                    self._map()
+                self._publish(self.capture.poll())
+        except Exception as exc:  # a bug: the device stops, loudly, instead of hanging its clients
+            self.failure = exc
+            logging.getLogger(__name__).exception("the ZeroMQ device thread stopped")
+        finally:
+            self._pub.close(linger=0)
+            self._sub.close(linger=0)
+
+    def _wait_s(self) -> float:
+        """Wall seconds until the next exposure is due (at most `IDLE_S`; less while a fit or gaze waits)."""
+        due_us = self.camera.time_of(self.camera.taken)
+        wait = min(IDLE_S, self.clock.wall_delay_s(due_us))
+        return min(wait, BATCH_S) if self.capture.gazer is not None or self.outlet is not None else wait
+
+    def _receive(self, wait_s: float) -> None:
+        """Wait up to `wait_s` for messages; handle those that arrived."""
+        if wait_s >= 0.001:
+            if not self._poller.poll(int(wait_s * 1000)):
+                return
+        elif wait_s > 0:
+            self._stop.wait(wait_s)
+        for _ in range(DRAIN):
+            try:
+                frames = self._sub.recv_multipart(zmq.NOBLOCK)
+            except zmq.Again:
+                return
+            self._handle(frames)
+
+    def _handle(self, frames: list[bytes]) -> None:
+        self.counters["messages_received"] += 1
+        try:
+            topic, payload = unpack(frames)
+        except PupilMessageError:
+            self.counters["messages_malformed"] += 1
+            return
+        self._publish(self.capture.on_message(topic, payload))
+
+    def _publish(self, payloads: list[dict[str, Any]]) -> None:
+        for payload in payloads:
+            self._pub.send_multipart(pack(payload))
+        self.counters["published"] += len(payloads)
+
+    # --- exposures -------------------------------------------------------------------------------
+    def _emit(self) -> None:
+        """Publish the exposures due."""
+        due = self.camera.due(self.clock.now_us())
+        behind = due - max(1, round(self.rate_hz * MAX_BEHIND_S))
+        if behind > 0:
+            self.camera.skip(behind)
+            self.counters["exposures_skipped"] += behind
+            due -= behind
+        if due <= 0:
+            return
+        exp = self.camera.take(due)
+        pupils = []
+        for n in range(len(exp)):
+            datums = exposure_datums(exp, n, self.windows, self.time)
+            self._publish(datums)
+            pupils.append(datums[0::2])
+            self._offer_frame(exp, n)
+        self.counters["exposures"] += len(exp)
+        if self.capture.session is not None:
+            self.capture.session.add_samples(np.asarray(self.time.of_us(exp.time_us)), *sample_arrays(exp))
+        if self.capture.gazer is not None or self.outlet is not None:
+            self.gaze.add(exp, pupils)
+
+    def _offer_frame(self, exp: Exposures, n: int) -> None:
+        frame_id = int(exp.batch.frame_id[n])
+        if self.frames is None or not self.capture.frames_on or frame_id % self.frame_every:
+            return
+        self.frames.offer(frame_id, float(self.time.of_us(int(exp.time_us[n]))), exp.values[n],
+                          bool(exp.blink[n]), self.capture.frame_format)
+
+    def _map(self) -> None:
+        """Map the waiting exposures to gaze; feed the LSL outlet."""
+        datums, block = self.gaze.flush(self.capture.gazer)
+        self._publish(datums)
+        if self.outlet is not None and block is not None:
+            self.outlet.push(block)
+
+    def close(self) -> None:
+        """Stop and join the thread (it closes its sockets)."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join()
+        elif not self._pub.closed:
+            self._pub.close(linger=0)
+            self._sub.close(linger=0)

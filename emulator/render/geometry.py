@@ -1,0 +1,223 @@
+"""Image-plane geometry of the eyes that `eyehil.emulator.render.renderer` draws (pure, batched numpy).
+
+Everything here is computed from the forward model's Features (arrays shaped (E, S, H, T, ...), scene
+frame mm, image px), the eyes (anatomy as right eyes) and the scene, and is returned per sample in
+full-sensor pixels (OpenCV convention: origin at the top-left pixel centre, x right, y down):
+
+- pupil: the ray-traced refracted boundary (`Features.pupil_points_px`, N points evenly spaced around
+  the stop) is interpolated by its trigonometric (Fourier) series into a dense closed curve, stored as
+  a polar table r(theta) about the fitted ellipse centre, the ground truth `Features.pupil_centre_px`.
+  Samples with blocked boundary points use the fitted ellipse instead.
+- limbus: the corneal edge, the circle of radius `EyeModel.limbus_radius` r_l at the anterior sag depth
+  w = r_l^2 / (R (1 + sqrt(1 - (1 + Q) r_l^2 / R^2))) about the optic axis a: scene points
+  apex - w a + r_l (cos t u + sin t v), u and v perpendicular to a. Its image is an ellipse, fitted to
+  24 projected points (exact for an undistorted pinhole camera).
+- glints: `Features.glint_px` and `Features.glint_valid`.
+- eyelids: margins fixed to the head, between a nasal and a temporal canthus (`Eyelids`, eye frame mm,
+  right-eye numbers with x nasal, mirrored for left eyes). At eye-frame x the margin height is
+  y(x) = y_c(x) + h (1 - s^2), y_c the straight line through the canthi, s = x / x_nasal for x > 0 and
+  x / |x_temporal| otherwise, h the height above y_c at x = 0; the margin lies on a sphere of radius
+  `margin_radius_mm` about (0, 0, -`margin_centre_mm`), clamped to the canthi's depth behind it.
+  Gaze: with dy the posed apex's rise in the head frame (mm, about 13 sin(elevation)), the margins at
+  x = 0 are upper_mm + upper_follow dy and lower_mm + lower_follow dy; a blink b in [0, 1] moves the
+  upper lid to upper + b (lower - upper) (closed at b = 1).
+
+Known answer: with blink 1 the upper and lower margins coincide point for point.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.features import Features
+from eyehil.emulator.optics.conic import Conic
+from eyehil.emulator.optics.ellipse import fit_ellipse
+from eyehil.emulator.scene import Scene
+
+LIMBUS_POINTS = 24
+POLAR_SAMPLES = 128
+
+
+@dataclass(frozen=True)
+class Eyelids:
+    """Lid margins (see the module docstring); eye frame mm of a right eye (x nasal, y up, z forward)."""
+
+    nasal_canthus_mm: tuple[float, float, float] = (13.0, -1.0, -6.0)
+    temporal_canthus_mm: tuple[float, float, float] = (-15.0, 0.5, -8.0)
+    upper_mm: float = 4.4  # upper margin height at x = 0 in primary gaze
+    lower_mm: float = -5.3
+    upper_follow: float = 0.9  # lid rise (mm) per mm of apex rise
+    lower_follow: float = 0.4
+    margin_centre_mm: float = 12.0  # the margin sphere's centre lies this far behind the rest apex
+    margin_radius_mm: float = 12.5
+    n_points: int = 33
+
+
+@dataclass(frozen=True, eq=False)
+class EyeOutline:
+    """Image geometry of a batch of eye samples (leading `shape`), full-sensor px; see the module docstring.
+
+    The polar pupil table holds, per sample, angles theta (M,) ascending in (-pi, pi], radii r (M,) px and
+    dr/dtheta (M,) px/rad about `pupil_centre_px`. Lids are polylines (K, 2) from canthus to canthus."""
+
+    pupil_centre_px: np.ndarray
+    pupil_axes_px: np.ndarray
+    pupil_angle_deg: np.ndarray
+    pupil_valid: np.ndarray
+    pupil_points_px: np.ndarray
+    pupil_theta: np.ndarray
+    pupil_r: np.ndarray
+    pupil_dr: np.ndarray
+    limbus_centre_px: np.ndarray
+    limbus_axes_px: np.ndarray
+    limbus_angle_deg: np.ndarray
+    glint_px: np.ndarray
+    glint_valid: np.ndarray
+    upper_lid_px: np.ndarray
+    lower_lid_px: np.ndarray
+    px_per_mm: np.ndarray
+    sensor_px: tuple[int, int]
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return self.pupil_valid.shape
+
+    def __getitem__(self, index) -> EyeOutline:
+        """The samples at `index` of the leading axes (numpy indexing)."""
+        values = {f.name: getattr(self, f.name) for f in fields(self)}
+        return EyeOutline(**{k: v if k == "sensor_px" else v[index] for k, v in values.items()})
+
+
+def eye_outlines(features: Features, eyes: EyeModel, scene: Scene, *, blink: float | np.ndarray = 0.0,
+                 lids: Eyelids | None = None) -> EyeOutline:
+    """The outline of every sample of `features` (E, S, H, T) of `eyes` (E) in `scene`; `blink` in [0, 1]
+    broadcasts against (E, S, H, T)."""
+    lids = lids or Eyelids()
+    eyes = eyes.as_batch()
+    pad = (slice(None), None, None, None)
+    limbus = limbus_ellipse(features, eyes.anterior_radius[pad], eyes.anterior_conic[pad],
+                            eyes.limbus_radius[pad], scene)
+    upper, lower = lid_margins(features, scene, lids, np.clip(blink, 0.0, 1.0))
+    theta, r, dr = pupil_polar(features.pupil_points_px, features.pupil_points_valid, features.pupil_centre_px,
+                               features.pupil_axes_px, features.pupil_angle_deg)
+    return EyeOutline(
+        pupil_centre_px=features.pupil_centre_px, pupil_axes_px=features.pupil_axes_px,
+        pupil_angle_deg=features.pupil_angle_deg, pupil_valid=features.pupil_valid & features.fixation_valid,
+        pupil_points_px=features.pupil_points_px, pupil_theta=theta, pupil_r=r, pupil_dr=dr,
+        limbus_centre_px=limbus.centre, limbus_axes_px=limbus.axes, limbus_angle_deg=limbus.angle_deg,
+        glint_px=features.glint_px, glint_valid=features.glint_valid, upper_lid_px=upper, lower_lid_px=lower,
+        px_per_mm=limbus.axes[..., 0] / (2.0 * eyes.limbus_radius[pad]), sensor_px=scene.camera.resolution_px,
+    )
+
+
+def limbus_ellipse(features: Features, radius: np.ndarray, conic: np.ndarray, limbus_radius: np.ndarray,
+                   scene: Scene):
+    """The image ellipse (`optics.ellipse.Ellipse`, px) of the corneal edge of each sample."""
+    axis = features.optic_axis
+    u = np.cross([0.0, 1.0, 0.0], axis)
+    u /= np.linalg.norm(u, axis=-1, keepdims=True)
+    v = np.cross(axis, u)
+    sag, _ = Conic(0.0, radius, conic, limbus_radius * 2.0).sag(limbus_radius**2)
+    t = 2.0 * np.pi * np.arange(LIMBUS_POINTS) / LIMBUS_POINTS
+    ring = np.cos(t)[:, None] * u[..., None, :] + np.sin(t)[:, None] * v[..., None, :]
+    centre = features.apex - sag[..., None] * axis
+    points = centre[..., None, :] + limbus_radius[..., None, None] * ring
+    px, _ = scene.camera.project(points)
+    return fit_ellipse(px)
+
+
+def lid_margins(features: Features, scene: Scene, lids: Eyelids, blink: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Upper and lower lid polylines (E, S, H, T, K, 2) px from canthus to canthus, by increasing image x."""
+    heads = features.head_positions
+    rot = np.stack([h.rotation for h in heads])  # (H, 3, 3) head -> scene
+    shift = np.stack([h.translation for h in heads])
+    apex_head = np.einsum("eshti,hij->eshtj", features.apex - shift[:, None], rot)
+    dy = apex_head[..., 1]
+    upper = lids.upper_mm + lids.upper_follow * dy
+    lower = lids.lower_mm + lids.lower_follow * dy
+    upper = upper + blink * (lower - upper)
+    sign = np.array([1.0 if s == "right" else -1.0 for s in features.sides])
+    rest_apex = np.stack([scene.apex(s) for s in features.sides])  # (S, 3) head frame
+    out = []
+    for height in (upper, lower):
+        local = _margin(lids, height)  # (E, S, H, T, K, 3) eye frame of a right eye
+        local = local * np.stack([sign, np.ones_like(sign), np.ones_like(sign)], -1)[:, None, None, None, :]
+        head = local + rest_apex[:, None, None, None, :]
+        scene_pts = np.einsum("hij,eshtkj->eshtki", rot, head) + shift[:, None, None, :]
+        px = scene.camera.project(scene_pts)[0]
+        order = np.argsort(np.nan_to_num(px[..., 0]), axis=-1)
+        out.append(np.take_along_axis(px, order[..., None], axis=-2))
+    return out[0], out[1]
+
+
+def _margin(lids: Eyelids, height: np.ndarray) -> np.ndarray:
+    """Margin points (..., K, 3) for centre heights (...) mm, eye frame of a right eye."""
+    (xn, yn, zn), (xt, yt, zt) = lids.nasal_canthus_mm, lids.temporal_canthus_mm
+    x = np.linspace(xn, xt, lids.n_points)
+    s = np.where(x > 0, x / xn, x / abs(xt))
+    line = yn + (yt - yn) * (x - xn) / (xt - xn)
+    y0 = yn + (yt - yn) * (0.0 - xn) / (xt - xn)
+    y = line + (height[..., None] - y0) * (1.0 - s**2)
+    canthus_z = zn + (zt - zn) * (x - xn) / (xt - xn)
+    z = -lids.margin_centre_mm + np.sqrt(np.maximum(lids.margin_radius_mm**2 - x**2 - y**2, 0.0))
+    z = np.maximum(z, canthus_z)
+    return np.stack([np.broadcast_to(x, y.shape), y, z], axis=-1)
+
+
+def pupil_polar(points: np.ndarray, valid: np.ndarray, centre: np.ndarray, axes: np.ndarray, angle_deg: np.ndarray,
+                m: int = POLAR_SAMPLES) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Polar tables (theta, r, dr/dtheta), each (..., m), of the pupil outline about `centre` (..., 2) px."""
+    dense = _fourier_upsample(points[..., 0] + 1j * points[..., 1], m)
+    t = 2.0 * np.pi * np.arange(m) / m
+    a, b, phi = axes[..., 0:1] / 2, axes[..., 1:2] / 2, np.radians(angle_deg)[..., None]
+    ellipse = (a * np.cos(t) + 1j * b * np.sin(t)) * np.exp(1j * phi) + (centre[..., 0:1] + 1j * centre[..., 1:2])
+    dense = np.where(np.all(valid, axis=-1, keepdims=True), dense, ellipse)
+    w = dense - (centre[..., 0:1] + 1j * centre[..., 1:2])
+    order = np.argsort(np.angle(np.nan_to_num(w)), axis=-1)
+    w = np.take_along_axis(w, order, axis=-1)
+    theta, r = np.angle(w), np.abs(w)
+    span = np.roll(theta, -1, axis=-1) - np.roll(theta, 1, axis=-1)
+    span = np.mod(span, 2.0 * np.pi)
+    dr = (np.roll(r, -1, axis=-1) - np.roll(r, 1, axis=-1)) / np.where(span > 0, span, np.inf)
+    return theta, r, dr
+
+
+def _fourier_upsample(z: np.ndarray, m: int) -> np.ndarray:
+    """Trigonometric interpolation of evenly spaced periodic samples z (..., n) onto m > n samples."""
+    n = z.shape[-1]
+    spec = np.fft.fft(np.nan_to_num(z), axis=-1)
+    out = np.zeros((*z.shape[:-1], m), dtype=complex)
+    h = (n + 1) // 2  # frequencies 0 .. h-1 and -(n-h) .. -1
+    out[..., :h] = spec[..., :h]
+    out[..., m - (n - h):] = spec[..., h:]
+    if n % 2 == 0:  # split the Nyquist term between +n/2 and -n/2
+        out[..., n // 2] = spec[..., n // 2] / 2
+        out[..., m - n // 2] = spec[..., n // 2] / 2
+    return np.fft.ifft(out, axis=-1) * (m / n)
+
+
+def aperture_coverage(x: np.ndarray, y: np.ndarray, upper: np.ndarray, lower: np.ndarray) -> np.ndarray:
+    """Fraction (0..1) of each pixel between the lids: 0.5 + `aperture_distance`, clipped."""
+    return np.clip(0.5 + aperture_distance(x, y, upper, lower), 0.0, 1.0)
+
+
+def aperture_distance(x: np.ndarray, y: np.ndarray, upper: np.ndarray, lower: np.ndarray) -> np.ndarray:
+    """Signed distance (px, + between the lids) to the nearest lid margin or canthal vertical; x (W,) and
+    y (H, 1) px give (H, W), equal-shaped x and y give pointwise values; lid polylines (K, 2) px sorted by x.
+
+    The margins are treated as graphs y(x), which holds unless the head or camera rolls beyond ~40 deg."""
+    f32 = np.float32
+    d_upper = (y - np.interp(x, upper[:, 0], upper[:, 1]).astype(f32)) * _cos_slope(x, upper).astype(f32)
+    d_lower = (np.interp(x, lower[:, 0], lower[:, 1]).astype(f32) - y) * _cos_slope(x, lower).astype(f32)
+    d_side = np.minimum(x - upper[0, 0], upper[-1, 0] - x).astype(f32)
+    return np.minimum(np.minimum(d_upper, d_lower), d_side)
+
+
+def _cos_slope(x: np.ndarray, line: np.ndarray) -> np.ndarray:
+    """cos(atan(dy/dx)) of the polyline `line` (K, 2), sorted by x, at abscissae x."""
+    dx, dy = np.diff(line[:, 0]), np.diff(line[:, 1])
+    cos = np.abs(dx) / np.maximum(np.hypot(dx, dy), 1e-12)
+    return np.interp(x, (line[1:, 0] + line[:-1, 0]) / 2, cos)
