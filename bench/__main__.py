@@ -20,6 +20,7 @@ BENCHMARKS = [
     "frames",
     "view",  # the live web view in headless Chromium (bench/view.py)
     "opengaze",  # Gazepoint Open Gaze samples at 60 and 150 Hz (bench/opengaze.py)
+    "discrepancy",  # the default eyehil discrepancy run (bench/discrepancy.py)
     "firmware",  # the firmware's C feature extractor (bench/firmware.py)
 ]
 ON_REQUEST = ["fuzz", "soak"]  # long runs (minutes to an hour): only when named

@@ -2,8 +2,12 @@
 
 Hidden-effect tests: "measured" data are simulated on other eyes (a Rozema 2011 draw, seed 11, 20 eyes;
 noise seed 5) with one effect at a known value; the workflow runs on 12 of the published eyes (noise
-seed 0) without being told, and must (a) find a significant gap, (b) name the hidden effect, (c) fit its
-parameter near the hidden value and (d) shrink the gap measure D by >= 70 %, adding nothing else.
+seed 0) without being told, choosing among five effects of the catalogue (`CANDIDATES`, to bound the
+runtime; the whole catalogue is tried by `python -m eyehil.analysis.discrepancy.trials`, docs/discrepancy.md),
+and must (a) find a significant gap, (b) name the hidden effect, (c) fit its parameter near the hidden
+value and (d) shrink the gap measure D by >= 70 %, adding nothing else. Further: a pair named in order,
+an effect outside the candidates reported as unexplained, a pure mean gap that noise cannot explain,
+four subjects without a hidden effect, and a hidden effect read from recordings.
 
 Tolerances (c) come from the eye samples, not from the search (whose resolution is 1/16 of a grid step,
 then a parabola): the two samples differ in how strongly each eye responds to an effect (per-eye spread
@@ -21,21 +25,25 @@ import json
 import numpy as np
 import pytest
 
-from eyehil.analysis.discrepancy.data import Measured, guestrin2006_real, load
+from eyehil.analysis.discrepancy.data import Measured, MeasuredCondition, guestrin2006_real, load
 from eyehil.analysis.discrepancy.guestrin import guestrin_metrics
+from eyehil.analysis.discrepancy.metrics import Evaluator
+from eyehil.analysis.discrepancy.recording import load_recordings, write_recording
 from eyehil.analysis.discrepancy.search import max_evaluations, search_effects
-from eyehil.analysis.discrepancy.stats import holm
-from eyehil.analysis.discrepancy.workflow import hidden_measured, run_discrepancy
+from eyehil.analysis.discrepancy.stats import compare, holm, normal_score, permutation_gof, permutation_p
+from eyehil.analysis.discrepancy.workflow import find, hidden_measured, run_discrepancy
 from eyehil.analysis.study import experiments
 from eyehil.cli import main
 from eyehil.emulator import effects
 from eyehil.emulator.effects import Applied, simulate_with
+from eyehil.emulator.effects.run import join_heads, perturb
 from eyehil.emulator.eye.population import sample
 from eyehil.emulator.eye.published import published_eyes
 from eyehil.emulator.forward import simulate
 from eyehil.emulator.scene import load_scene
 
 SEARCH_EYES = 12
+CANDIDATES = ["feature_noise", "pupil_decentre", "pupil_change", "lens_distortion", "head_roll"]
 HIDDEN = [("pupil_change", {"delta_diameter_mm": -0.7}, 0.10),
           ("lens_distortion", {"k1": 1.8}, 0.3),
           ("feature_noise", {"sigma_px": 0.12}, 0.05)]  # an anatomy, a scene and a features effect
@@ -54,10 +62,10 @@ def hidden_eyes():
 def test_every_effect_is_named_documented_and_neutral(scene) -> None:
     eyes = published_eyes()[:2]
     plain = simulate(eyes, scene)
-    assert 4 <= len(effects.names()) <= 6
+    assert len(effects.names()) >= 15
     for name in effects.names():
         e = effects.get(name)
-        assert e.name == name and e.reference and e.summary() and e.fitted
+        assert e.name == name and e.reference and e.prior and e.summary() and e.fitted
         assert all(p.unit is not None and p.low < p.high and p.low <= p.default <= p.high for p in e.parameters)
         moved = simulate_with(eyes, scene, [Applied(e, e.neutral())], rng=np.random.default_rng(0))
         for key in ("pupil_centre_px", "glint_px", "azimuth_deg"):
@@ -111,19 +119,91 @@ def test_measured_data_round_trip_and_refusals(tmp_path) -> None:
 
 def test_search_recovers_a_known_quadratic_minimum_and_its_curvature() -> None:
     def roll(batch):  # D = 4 (roll - 1.3)^2 + 3: minimum 1.3 deg, 1-sigma sqrt(2 / 8) = 0.5 deg
-        return np.array([4 * (a.values["roll_deg"] - 1.3) ** 2 + 3 for a in batch])
+        return [{"D": np.array([4 * (a.values["roll_deg"] - 1.3) ** 2 + 3])} for a in batch]
 
     def decentre(batch):  # a correlated 2-D bowl around (0.2, 0.1) mm
         x, y = (np.array([a.values[k] for a in batch]) for k in ("nasal_mm", "superior_mm"))
-        return 100 * ((x - 0.2) ** 2 + (y - 0.1) ** 2 + (x - 0.2) * (y - 0.1)) + 1
+        return [{"D": np.array([d])} for d in 100 * ((x - 0.2) ** 2 + (y - 0.1) ** 2 + (x - 0.2) * (y - 0.1)) + 1]
 
-    fit = search_effects([effects.get("head_roll")], roll, D0=100.0, n_conditions=7)[0]
+    def score(m):
+        return float(m["D"][0])
+
+    fit = search_effects([effects.get("head_roll")], roll, score, D0=100.0, n_conditions=7)[0]
     assert fit.values["roll_deg"] == pytest.approx(1.3, abs=1e-6) and abs(fit.D - 3.0) < 1e-9
-    assert fit.sigma["roll_deg"] == pytest.approx(0.5, rel=1e-6) and fit.passes()
+    assert fit.sigma["roll_deg"] == pytest.approx(0.5, rel=1e-6) and fit.passes() and not fit.screened
     assert len(fit.points) <= max_evaluations(fit.effect)
-    fit2 = search_effects([effects.get("pupil_decentre")], decentre, D0=100.0, n_conditions=7)[0]
+    fit2 = search_effects([effects.get("pupil_decentre")], decentre, score, D0=100.0, n_conditions=7)[0]
     assert (fit2.values["nasal_mm"], fit2.values["superior_mm"]) == pytest.approx((0.2, 0.1), abs=1e-6)
     assert fit2.sigma["nasal_mm"] == pytest.approx(np.sqrt(2 * (2 / 3) / 100), rel=1e-3)
+
+
+def test_search_screens_many_effects_and_refines_only_the_best() -> None:
+    def bowl(batch):  # only head_roll can reach D = 2; the others stay near 50
+        out = []
+        for a in batch:
+            d = 4 * (a.values["roll_deg"] - 2.0) ** 2 + 2 if a.effect.name == "head_roll" else \
+                50 + sum((v - 0.01) ** 2 for v in a.values.values())
+            out.append({"D": np.array([d])})
+        return out
+
+    names = ("feature_noise", "head_roll", "lens_distortion", "corneal_index", "led_position")
+    chosen = [effects.get(n) for n in names]
+    fits = search_effects(chosen, bowl, lambda m: float(m["D"][0]), D0=100.0, n_conditions=7, top=2)
+    by = {f.effect.name: f for f in fits}
+    assert by["head_roll"].values["roll_deg"] == pytest.approx(2.0, abs=1e-6) and not by["head_roll"].screened
+    screened = [f for f in fits if f.screened]
+    assert len(screened) == 3 and all(np.isnan(next(iter(f.sigma.values()))) for f in screened)
+
+
+def test_a_fit_at_the_edge_of_its_range_is_flagged_and_not_added() -> None:
+    def falling(batch):  # D falls toward k1 = +3 (the bound) and beyond
+        return [{"D": np.array([100.0 - 20.0 * a.values["k1"]])} for a in batch]
+
+    fit = search_effects([effects.get("lens_distortion")], falling, lambda m: float(m["D"][0]), D0=100.0,
+                         n_conditions=7)[0]
+    assert fit.values["k1"] == pytest.approx(3.0) and fit.at_edge == ["k1"]
+    assert fit.lowers() and not fit.passes()
+
+
+def test_permutation_tests_hold_their_level_on_four_skewed_subjects() -> None:
+    rng = np.random.default_rng(3)
+    hits = 0
+    for trial in range(200):  # lognormal errors, 4 "subjects" against 20 "eyes" of the same distribution
+        sim, meas = rng.lognormal(-1.0, 0.6, 20), rng.lognormal(-1.0, 0.6, 4)
+        p_mean, p_spread = permutation_p(sim, meas, seed=trial, B=999)
+        hits += p_mean < 0.05
+        assert 0 < p_mean <= 1 and 0 < p_spread <= 1
+    assert hits <= 20  # 10 expected at the 5 % level; the t-test's excess came from the skew
+    p_mean, _ = permutation_p(rng.normal(0, 1, 30), rng.normal(3, 1, 6), seed=1, B=999)
+    assert p_mean < 0.01
+
+
+def test_permutation_goodness_of_fit_keeps_correlated_terms() -> None:
+    """Seven conditions that share one subject effect (strongly correlated terms): the relabelling test of
+    D holds its level where the terms are exchangeable, and rejects a shift of six of them."""
+    rng = np.random.default_rng(1)
+
+    def reference(c):
+        return "a" if c.startswith("b") else None
+
+    def case(shift):
+        sim_a, meas_a = rng.normal(0, 1, 40), rng.normal(0, 1, 15)
+        sim = {"a": sim_a, **{f"b{i}": sim_a + rng.normal(0, 0.2, 40) for i in range(6)}}
+        meas = Measured("x", {"a": MeasuredCondition.of(meas_a), **{
+            f"b{i}": MeasuredCondition.of(meas_a + shift + rng.normal(0, 0.2, 15)) for i in range(6)}},
+            tuple(str(i) for i in range(15)))
+        D = compare(sim, meas, reference, tests=False).D
+        return permutation_gof(sim, meas, reference, D, B=199)
+
+    assert sum(case(0.0) < 0.05 for _ in range(20)) <= 3
+    assert case(0.3) < 0.01
+
+
+def test_normal_scores_and_the_spread_term() -> None:
+    assert normal_score(2.0, 1e6) == pytest.approx(2.0, abs=1e-4)
+    assert 0 < normal_score(5.0, 3) < 5.0 and normal_score(-5.0, 3) == -normal_score(5.0, 3)
+    assert normal_score(1e6, 3) > 0
+    np.testing.assert_allclose(holm(np.array([0.01, np.nan, 0.04])), [0.02, np.nan, 0.04])
 
 
 def test_holm_adjustment_known_answer() -> None:
@@ -134,7 +214,8 @@ def test_holm_adjustment_known_answer() -> None:
 def test_workflow_finds_names_and_fits_a_hidden_effect(hidden_eyes, name, values, tolerance) -> None:
     hidden = Applied.of(effects.get(name), values)
     measured = hidden_measured([hidden], eyes=hidden_eyes, seed=5)
-    result = run_discrepancy(measured, eyes=published_eyes()[:SEARCH_EYES], rounds=2, workers=2)
+    result = run_discrepancy(measured, eyes=published_eyes()[:SEARCH_EYES], effect_names=CANDIDATES, rounds=2,
+                             workers=2)
     first = result.rounds[0]
     assert first.before.significant  # (a) the gap is found
     assert first.added is not None and first.added.effect.name == name  # (b) and named
@@ -142,25 +223,107 @@ def test_workflow_finds_names_and_fits_a_hidden_effect(hidden_eyes, name, values
         assert first.added.values[parameter] == pytest.approx(value, abs=tolerance), parameter
     assert result.shrink >= 0.7  # (d) the gap shrinks
     assert [a.effect.name for a in result.added] == [name]  # and nothing spurious is added
-    assert not result.after.significant
+    assert result.outcome == "explained" and [a.effect.name for a in result.named] == [name]
+    summary = result.summary()
+    assert summary["named_effects"] == [name] and set(summary["parameters"][name]) == set(values)
 
 
 def test_negative_control_finds_no_gap_and_adds_nothing(hidden_eyes) -> None:
     measured = hidden_measured([], eyes=hidden_eyes, seed=5)
-    result = run_discrepancy(measured, eyes=published_eyes()[:SEARCH_EYES], rounds=2, workers=1)
+    result = run_discrepancy(measured, eyes=published_eyes()[:SEARCH_EYES], effect_names=CANDIDATES, rounds=2)
     assert not result.rounds[0].before.significant
-    assert result.added == [] and result.rounds[0].fits == []
+    assert result.added == [] and result.rounds[0].fits == [] and result.outcome == "no gap"
     assert result.after.D == result.before.D
 
 
-def test_cli_writes_the_report(tmp_path, capsys) -> None:
+def test_four_subjects_and_nothing_hidden_show_no_spurious_gap() -> None:
+    """The issue's case: 4 subjects of the same population, nothing hidden. The permutation tests hold their
+    level: over 10 draws of 4 eyes (other published eyes, their own noise seed) at most 2 show any
+    significant gap (0.5 expected at the family-wise 5 %; a single draw can differ for real: four eyes with
+    nearly spherical corneas have a lower error level, which the test then rightly reports)."""
+    search = Evaluator("guestrin2006", published_eyes()[:SEARCH_EYES], seed=0)
+    rng = np.random.default_rng(23)
+    pool = published_eyes()[SEARCH_EYES:]
+    flagged = 0
+    for draw in range(10):
+        four = pool[np.sort(rng.choice(len(pool), 4, replace=False))]
+        comparison = find(search, hidden_measured([], eyes=four, seed=100 + draw))
+        assert {g.test for g in comparison.gaps} == {"permutation"}
+        flagged += bool(comparison.significant)
+    assert flagged <= 2
+
+
+def test_an_effect_outside_the_catalogue_is_reported_as_unexplained(hidden_eyes) -> None:
+    hidden = effects.parse("head_roll=4")
+    measured = hidden_measured([hidden], eyes=hidden_eyes, seed=5)
+    allowed = [n for n in CANDIDATES if n != "head_roll"]
+    result = run_discrepancy(measured, eyes=published_eyes()[:SEARCH_EYES], effect_names=allowed, rounds=2)
+    assert result.rounds[0].before.significant
+    assert result.outcome == "none explains" and result.named == []
+    assert "none of the known effects" in result.reason
+
+
+def test_added_noise_cannot_explain_a_gap_in_the_means(hidden_eyes) -> None:
+    """A pure shift of the head-movement contrasts (0.15 deg, no change of spread): noise widens the simulated
+    spread, which the spread terms of D refuse, and whatever is added leaves a significant gap."""
+    plain = hidden_measured([], eyes=hidden_eyes, seed=5)
+    shifted = {c: (MeasuredCondition.of(v.values + 0.15) if c.startswith("head:") else v)
+               for c, v in plain.conditions.items()}
+    measured = Measured(plain.experiment, shifted, plain.subjects, "shifted contrasts")
+    result = run_discrepancy(measured, eyes=published_eyes()[:SEARCH_EYES], effect_names=["feature_noise"], rounds=1)
+    assert result.rounds[0].before.significant
+    assert result.outcome == "none explains" and result.named == []
+
+
+def test_two_hidden_effects_are_named_in_order_of_size(hidden_eyes) -> None:
+    hidden = [effects.parse("pupil_change=-0.7"), effects.parse("feature_noise=0.1")]
+    measured = hidden_measured(hidden, eyes=hidden_eyes, seed=5)
+    result = run_discrepancy(measured, eyes=published_eyes()[:SEARCH_EYES], effect_names=CANDIDATES, rounds=2,
+                             workers=2)
+    assert result.outcome == "explained", result.reason
+    assert [a.effect.name for a in result.named] == ["pupil_change", "feature_noise"]
+    inter = result.interactions
+    assert inter is not None and set(inter.alone) == {"pupil_change", "feature_noise"}
+    assert inter.alone["pupil_change"] < inter.alone["feature_noise"] and np.isfinite(inter.interaction)
+
+
+def test_recordings_round_trip_and_a_hidden_effect_is_named_from_them(tmp_path, hidden_eyes) -> None:
+    hidden = effects.parse("pupil_change=-0.7")
+    evaluator = Evaluator("guestrin2006", hidden_eyes, base=[hidden], seed=5)
+    features = perturb(join_heads(list(evaluator.setup.cache.values()), evaluator.host), evaluator.base,
+                       np.random.default_rng(5), evaluator.setup.sensitivities)
+    for e in range(len(hidden_eyes)):
+        write_recording(tmp_path / f"s{e:02d}.jsonl", features, e, samples=2)
+    measured = load_recordings(tmp_path)
+    assert measured.paired and len(measured.subjects) == len(hidden_eyes)
+    np.testing.assert_allclose(measured.conditions["pgv_x:central"].values, evaluator.base_metrics["pgv_x:central"],
+                               atol=1e-9)
+    np.testing.assert_allclose(measured.conditions["H1"].values, evaluator.base_metrics["H1"], atol=1e-3)
+    result = run_discrepancy(measured, eyes=published_eyes()[:SEARCH_EYES], effect_names=CANDIDATES, rounds=1,
+                             workers=2)
+    assert result.outcome == "explained" and [a.effect.name for a in result.named] == ["pupil_change"]
+    assert result.rounds[0].added.values["delta_diameter_mm"] == pytest.approx(-0.7, abs=0.1)
+
+
+def test_cli_writes_the_report_and_reports_progress(tmp_path, capsys) -> None:
+    """(With 4 + 6 eyes no gap can be significant: an exact permutation test of 10 values cannot reach
+    p < 0.05 / 14 for the Holm family; hence 6 + 8.)"""
     out = tmp_path / "d"
-    code = main(["discrepancy", "--hidden", "head_roll=4", "--search-eyes", "4", "--eyes", "4",
-                 "--hidden-eyes", "6", "--effects", "head_roll", "--rounds", "1", "--workers", "1",
-                 "--quiet", "--out", str(out)])
+    code = main(["discrepancy", "--hidden", "head_roll=4", "--search-eyes", "6", "--eyes", "6",
+                 "--hidden-eyes", "8", "--effects", "head_roll,feature_noise", "--exclude", "feature_noise",
+                 "--rounds", "1", "--workers", "1", "--out", str(out)])
     assert code == 0
-    assert {"report.md", "result.json", "measured.json", "discrepancy.png"} <= {p.name for p in out.iterdir()}
+    assert {"report.md", "result.json", "summary.json", "measured.json", "discrepancy.png"} <= \
+        {p.name for p in out.iterdir()}
     report = (out / "report.md").read_text()
-    assert "head_roll" in report and "Truth (hidden from the workflow)" in report
+    assert "head_roll" in report and "Truth (hidden from the workflow)" in report and "Outcome:" in report
     assert json.loads((out / "result.json").read_text())["added"][0]["effect"] == "head_roll"
-    assert "hidden truth: head_roll" in capsys.readouterr().out
+    summary = json.loads((out / "summary.json").read_text())
+    assert {"named_effects", "parameters", "gap_before", "gap_after", "outcome"} <= set(summary)
+    captured = capsys.readouterr()
+    assert "hidden truth: head_roll" in captured.out
+    for stage in ("simulating and calibrating the search eyes", "round 1: fitting 1 effects", "show:"):
+        assert stage in captured.err
+    main(["discrepancy", "--hidden", "head_roll=4", "--search-eyes", "3", "--eyes", "3", "--hidden-eyes", "3",
+          "--effects", "head_roll", "--rounds", "1", "--workers", "1", "--quiet", "--out", str(out)])
+    assert capsys.readouterr().err == ""

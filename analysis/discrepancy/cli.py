@@ -4,7 +4,8 @@ and show the gap shrink (analysis/discrepancy/workflow.py; docs/discrepancy.md).
 Measured data: a built-in real data set (guestrin2006, the default: Guestrin & Eizenman 2006's 4 subjects;
 blignaut2014: Blignaut 2014's best-function means), a file in the eyehil.measured/1 JSON format, or
 --hidden EFFECT=VALUE: data simulated on other eyes (a Rozema 2011 draw) with an effect the workflow is not
-told about. Writes result.json, measured.json, report.md and discrepancy.png into --out.
+told about. Writes summary.json, result.json, measured.json, report.md and discrepancy.png into --out.
+Progress of every stage goes to stderr (--quiet: none).
 """
 
 from __future__ import annotations
@@ -32,8 +33,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rounds", type=int, default=2, help="find-name-add rounds at most (default 2)")
     p.add_argument("--alpha", type=float, default=0.05, help="family-wise significance level (default 0.05)")
     p.add_argument("--effects", default=None, help="comma-separated effect names to consider (default: all)")
+    p.add_argument("--exclude", default=None, help="comma-separated effect names to leave out of the catalogue")
     p.add_argument("--workers", type=int, default=None, help="worker processes (default: one per core)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=run)
 
 
@@ -61,11 +63,31 @@ def _check(args: argparse.Namespace) -> None:
         raise ValueError("--workers must be >= 1")
 
 
-def run(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
+class BarProgress:
+    """One tqdm bar per stage of the workflow, on stderr (`eyehil.analysis.discrepancy.workflow.Progress`)."""
 
+    def __init__(self, disable: bool):
+        self.disable, self.bar = disable, None
+
+    def stage(self, label: str, total: int) -> None:
+        from tqdm import tqdm
+
+        self.close()
+        self.bar = tqdm(total=total, desc=label, unit="step", disable=self.disable, leave=True)
+
+    def advance(self, n: int) -> None:
+        if self.bar is not None:
+            self.bar.total = max(self.bar.total, self.bar.n + n)
+            self.bar.update(n)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+
+def run(args: argparse.Namespace) -> int:
     from eyehil.analysis.discrepancy.report import write_outputs
-    from eyehil.analysis.discrepancy.search import max_evaluations
     from eyehil.analysis.discrepancy.workflow import run_discrepancy
     from eyehil.analysis.study.runner import default_workers
     from eyehil.emulator import effects as registry
@@ -73,22 +95,23 @@ def run(args: argparse.Namespace) -> int:
 
     _check(args)
     names = [n.strip() for n in args.effects.split(",")] if args.effects else registry.names()
-    for n in names:
+    excluded = [n.strip() for n in args.exclude.split(",")] if args.exclude else []
+    for n in [*names, *excluded]:
         registry.get(n)
+    names = [n for n in names if n not in excluded]
+    progress = BarProgress(args.quiet)
+    start = time.perf_counter()
+    progress.stage("measured data", 1)
     measured = _measured(args)
     eyes, about = eyes_from_spec(args.eyes, args.seed)
-    start = time.perf_counter()
-    total = sum(max_evaluations(registry.get(n)) for n in names)
-    with tqdm(total=total, unit="eval", desc="discrepancy search", disable=args.quiet) as bar:
-
-        def tell(n: int) -> None:
-            bar.total = max(bar.total, bar.n + n)
-            bar.update(n)
-
-        result = run_discrepancy(measured, eyes=eyes, search_eyes=eyes[: min(args.search_eyes, len(eyes))],
-                                 effect_names=names, rounds=args.rounds, alpha=args.alpha, seed=args.seed,
-                                 workers=args.workers or default_workers(), progress=tell)
+    progress.advance(1)
+    result = run_discrepancy(measured, eyes=eyes, search_eyes=eyes[: min(args.search_eyes, len(eyes))],
+                             effect_names=names, rounds=args.rounds, alpha=args.alpha, seed=args.seed,
+                             workers=args.workers or default_workers(), progress=progress)
+    progress.stage("writing the report and figure", 1)
     written = write_outputs(result, Path(args.out))
+    progress.advance(1)
+    progress.close()
     _print(result, about, time.perf_counter() - start, written)
     return 0
 
@@ -102,6 +125,9 @@ def _print(result, about: str, seconds: float, written) -> None:
         for f in r.fits[:3]:
             print(f"    {f.applied.label()}: D {f.D:.2f} ({100 * f.explained:.0f} % explained)")
         print(f"    {r.verdict}")
+    named = ", ".join(a.label() for a in result.named) or "none"
+    print(f"  outcome: {result.outcome}; named (largest first): {named}")
+    print(f"    {result.reason}")
     left = ", ".join(g.compared for g in result.after.significant) or "none"
     print(f"  show ({result.settings['eyes']} eyes): D {result.before.D:.2f} -> {result.after.D:.2f}; "
           f"significant gaps left: {left}")

@@ -4,7 +4,9 @@ An experiment turns features into per-eye conditions (degrees, one array (E,) pe
 
 - guestrin2006 (scene `guestrin2006`, right eye, 9 targets x 5 head positions): "H1", "H2",
   "head:<name>", "bias_x:H1|H2", "bias_y:H1|H2" (`eyehil.analysis.discrepancy.guestrin`); H2 and head:* have
-  the reference H1 (compared within subjects when the measured data are paired).
+  the reference H1 (compared within subjects when the measured data are paired); and the feature
+  conditions of `eyehil.analysis.discrepancy.recording` (pupil-glint vectors and gains, glint spacing, pupil
+  size and shape per head position, referred to the central position).
 - blignaut2014 (scene `blignaut2014`, binocular, 135 targets, one head position): "C5" ... "C135", each
   eye's error under the configuration's best function (the model of lowest mean error over the simulated
   eyes, as `eyehil.analysis.study.summary`), and "M<k>:<configuration>" for model k; no references.
@@ -12,24 +14,33 @@ An experiment turns features into per-eye conditions (degrees, one array (E,) pe
 `Evaluator` simulates a fixed set of eyes with the base effects plus each point's extra effects (every
 point with the same Generator seed: common random numbers; a session that no extra effect can change is
 reused from the base), and runs the experiment on all points together (Guestrin: one batched calibration,
-warm-started from the base fit). The host always keeps the nominal scene.
+warm-started from the base fit; a point whose extra effects act only at the validation head positions
+and draw no random numbers has the base's calibration session, so it reuses the base's calibrated
+parameters instead of calibrating again). Effects that act through their features' sensitivity
+(`eyehil.emulator.effects.subject`) have it computed once per evaluator, in the parent process, and cached.
+The host always keeps the nominal scene.
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from eyehil.analysis.discrepancy.guestrin import guestrin_metrics
+from eyehil.analysis.discrepancy.guestrin import START, guestrin_metrics
+from eyehil.analysis.discrepancy.recording import feature_conditions, feature_reference
 from eyehil.analysis.study import experiments
+from eyehil.analysis.study.bridge import eye_samples, screen_targets, tracker_geometry
 from eyehil.analysis.study.published import CONFIGURATIONS
 from eyehil.analysis.study.summary import best_functions
+from eyehil.drivers.gaze.base import STUDY_VIEWING_DISTANCE_MM, on_screen_error_deg
 from eyehil.drivers.gaze.forms import MODELS
+from eyehil.drivers.gaze.guestrin import EyeParameters, point_of_gaze
 from eyehil.emulator.effects import Applied
-from eyehil.emulator.effects.run import join_heads, perturb, sessions, simulate_session
+from eyehil.emulator.effects.run import join_heads, perturb, sensitivity, sessions, simulate_session
 from eyehil.emulator.eye.model import EyeModel
 from eyehil.emulator.features import Features
 from eyehil.emulator.scene import Scene, load_scene
@@ -44,19 +55,37 @@ class GuestrinExperiment:
     scene = "guestrin2006"
 
     def reference(self, condition: str) -> str | None:
-        return "H1" if condition == "H2" or condition.startswith("head:") else None
+        if condition == "H2" or condition.startswith("head:"):
+            return "H1"
+        return feature_reference(condition)
 
     def diagnostic_conditions(self, host: Scene) -> tuple[str, ...]:
         """H1, the error at each moved head position, and the signed mean error over them (x, y)."""
         return ("H1", *(f"head:{h.name}" for h in host.head_positions[1:]), "bias_x:H2", "bias_y:H2")
 
-    def metrics(self, features: Sequence[Features], host: Scene, start: np.ndarray | None = None) -> list[Metrics]:
-        n = features[0].shape[0]
-        arrays = {k: np.concatenate([f.arrays[k] for f in features]) for k in features[0].arrays}
-        joined = replace(features[0], arrays=arrays)
-        tiled = None if start is None else np.tile(start, (len(features), 1))
-        out, _ = guestrin_metrics(joined, host, start=tiled)
-        return [{k: v[i * n:(i + 1) * n] for k, v in out.items()} for i in range(len(features))]
+    def metrics(self, features: Sequence[Features], host: Scene, start: np.ndarray | None = None,
+                calibrated: Sequence[bool] | None = None) -> list[Metrics]:
+        """Conditions of every features set; `calibrated[i]`: point i's calibration session is the base's,
+        so `start` (the base fit) is its calibration."""
+        reuse = [i for i in range(len(features)) if calibrated is not None and calibrated[i] and start is not None]
+        fit = [i for i in range(len(features)) if i not in reuse]
+        out: list[Metrics | None] = [None] * len(features)
+        if fit:
+            n = features[0].shape[0]
+            arrays = {k: np.concatenate([features[i].arrays[k] for i in fit]) for k in features[0].arrays}
+            tiled = None if start is None else np.tile(start, (len(fit), 1))
+            joined, _ = guestrin_metrics(replace(features[0], arrays=arrays), host, start=tiled)
+            for j, i in enumerate(fit):
+                out[i] = {k: v[j * n:(j + 1) * n] for k, v in joined.items()}
+        if reuse:
+            n = features[0].shape[0]
+            arrays = {k: np.concatenate([features[i].arrays[k] for i in reuse]) for k in features[0].arrays}
+            joined = guestrin_metrics_at(replace(features[0], arrays=arrays), host, np.tile(start, (len(reuse), 1)))
+            for j, i in enumerate(reuse):
+                out[i] = {k: v[j * n:(j + 1) * n] for k, v in joined.items()}
+        for i, f in enumerate(features):
+            out[i].update(feature_conditions(f))  # type: ignore[union-attr]
+        return out  # type: ignore[return-value]
 
     def base_parameters(self, features: Features, host: Scene) -> np.ndarray:
         """Calibrated parameters (E, 4) of the base features: the warm start of later points."""
@@ -75,7 +104,8 @@ class BlignautExperiment:
     def diagnostic_conditions(self, host: Scene) -> tuple[str, ...]:
         return CONFIGURATIONS
 
-    def metrics(self, features: Sequence[Features], host: Scene, start: np.ndarray | None = None) -> list[Metrics]:
+    def metrics(self, features: Sequence[Features], host: Scene, start: np.ndarray | None = None,
+                calibrated: Sequence[bool] | None = None) -> list[Metrics]:
         return [self._one(f, host) for f in features]
 
     def base_parameters(self, features: Features, host: Scene) -> None:
@@ -89,6 +119,28 @@ class BlignautExperiment:
         for m, k in enumerate(models):
             out.update({f"M{k}:{c}": errors[:, m, i] for i, c in enumerate(CONFIGURATIONS)})
         return out
+
+
+def guestrin_metrics_at(features: Features, host: Scene, params: np.ndarray, side: str = "right") -> Metrics:
+    """The conditions of `guestrin_metrics` for given calibrated parameters (E, 4) (NaN rows: not
+    calibrated), without calibrating."""
+    geometry, targets = tracker_geometry(host), screen_targets(host)
+    s = eye_samples(features, side)
+    ok = np.all(np.isfinite(params), axis=1)
+    x = np.where(ok[:, None], params, START)
+    estimate = point_of_gaze(geometry, s, EyeParameters(*(x[:, i][:, None, None] for i in range(4))))
+    estimate = np.where(ok[:, None, None, None], estimate, np.nan)
+    error = on_screen_error_deg(estimate, targets)
+    signed = np.degrees(np.arctan((estimate - targets) / STUDY_VIEWING_DISTANCE_MM))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows: eyes that could not be calibrated
+        out = {"H1": np.nanmean(error[:, 0], axis=-1), "H2": np.nanmean(error[:, 1:], axis=(1, 2))}
+        for h, head in enumerate(features.head_positions[1:], start=1):
+            out[f"head:{getattr(head, 'name', h)}"] = np.nanmean(error[:, h], axis=-1)
+        for key, part in (("H1", signed[:, :1]), ("H2", signed[:, 1:])):
+            out[f"bias_x:{key}"] = np.nanmean(part[..., 0], axis=(1, 2))
+            out[f"bias_y:{key}"] = np.nanmean(part[..., 1], axis=(1, 2))
+    return out
 
 
 EXPERIMENTS = {"guestrin2006": GuestrinExperiment, "blignaut2014": BlignautExperiment}
@@ -111,19 +163,22 @@ class Setup:
     seed: int
     cache: dict[str, Features]  # base features (before perturb) per session
     start: np.ndarray | None  # warm start of the calibration (Guestrin), (E, 4)
+    sensitivities: dict[str, dict[str, np.ndarray]]  # per effect name (effects with needs_sensitivity)
 
 
 def evaluate_points(setup: Setup, points: Sequence[Sequence[Applied]]) -> list[Metrics]:
     """Conditions for every point (a list of extra effects each); sessions the extra effects cannot change
     come from the cache; the same Generator seed for every point."""
-    features = []
+    features, calibrated = [], []
     for extra in points:
         applied = [*setup.base, *extra]
         parts = [simulate_session(setup.eyes, setup.host, applied, session, heads)
                  if any(a.effect.acts_in(session) for a in extra) else setup.cache[session]
                  for session, heads in sessions(setup.host)]
-        features.append(perturb(join_heads(parts, setup.host), applied, np.random.default_rng(setup.seed)))
-    return experiment(setup.experiment).metrics(features, setup.host, setup.start)
+        features.append(perturb(join_heads(parts, setup.host), applied, np.random.default_rng(setup.seed),
+                                setup.sensitivities))
+        calibrated.append(all(a.effect.stage == "model" and a.effect.validation_only for a in extra))
+    return experiment(setup.experiment).metrics(features, setup.host, setup.start, calibrated)
 
 
 class Evaluator:
@@ -139,11 +194,22 @@ class Evaluator:
         self.pool, self.workers = pool, workers
         cache = {session: simulate_session(self.eyes, self.host, self.base, session, heads)
                  for session, heads in sessions(self.host)}
-        setup = Setup(experiment_name, self.eyes, self.host, self.base, seed, cache, None)
-        features = perturb(join_heads(list(cache.values()), self.host), self.base, np.random.default_rng(seed))
+        setup = Setup(experiment_name, self.eyes, self.host, self.base, seed, cache, None, {})
+        self.setup = setup
+        self._sensitivities(self.base)
+        features = perturb(join_heads(list(cache.values()), self.host), self.base, np.random.default_rng(seed),
+                           setup.sensitivities)
         start = self.experiment.base_parameters(features, self.host)
         self.setup = replace(setup, start=start)
         self.base_metrics = self.experiment.metrics([features], self.host, start)[0]
+
+    def _sensitivities(self, applied: Sequence[Applied]) -> None:
+        """Compute and cache the sensitivity of every effect of `applied` that needs one (base model: the
+        base effects that act in the ray tracing)."""
+        model = [a for a in self.base if not a.effect.needs_sensitivity]
+        for a in applied:
+            if a.effect.needs_sensitivity and a.effect.name not in self.setup.sensitivities:
+                self.setup.sensitivities[a.effect.name] = sensitivity(a.effect, self.eyes, self.host, model)
 
     def with_base(self, base: Sequence[Applied]) -> Evaluator:
         """The same eyes, seed and pool with other base effects."""
@@ -153,6 +219,7 @@ class Evaluator:
     def evaluate(self, points: Sequence[Sequence[Applied]],
                  progress: Callable[[int], None] | None = None) -> list[Metrics]:
         """Conditions for every point (a list of extra effects each)."""
+        self._sensitivities([a for p in points for a in p])
         if self.pool is None or self.workers < 2 or len(points) < 2:
             out = evaluate_points(self.setup, points)
         else:

@@ -1,4 +1,5 @@
-"""Write a discrepancy run to a folder: result.json, measured.json (the data, in its file format),
+"""Write a discrepancy run to a folder: summary.json (outcome, named effects in order, their parameters,
+the gap before and after), result.json (everything), measured.json (the data, in its file format),
 report.md and discrepancy.png (gap per condition before and after; D along each effect's parameter)."""
 
 from __future__ import annotations
@@ -21,27 +22,34 @@ def write_outputs(result: DiscrepancyResult, out: Path) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     paths = [result.measured.save(out / "measured.json"), out / "result.json", figure(result, out / "discrepancy.png")]
     (out / "result.json").write_text(json.dumps(to_dict(result), indent=1, default=_json) + "\n", encoding="utf-8")
+    (out / "summary.json").write_text(json.dumps(result.summary(), indent=1, default=_json) + "\n", encoding="utf-8")
     (out / "report.md").write_text(render_markdown(result, "discrepancy.png"), encoding="utf-8")
-    return [*paths, out / "report.md"]
+    return [*paths, out / "summary.json", out / "report.md"]
 
 
 def _json(value: Any) -> Any:
     if isinstance(value, np.generic | np.ndarray):
         return value.tolist()
+    if isinstance(value, Comparison):
+        return value.to_dict()
     raise TypeError(f"not JSON serialisable: {type(value)}")
 
 
 def _fit_dict(f: EffectFit) -> dict[str, Any]:
-    return {"effect": f.effect.name, "values": f.values, "sigma": f.sigma, "D": f.D, "D0": f.D0,
-            "explained": f.explained, "score": f.score, "passes": f.passes(), "alternatives": f.alternatives,
+    return {"effect": f.effect.name, "values": f.values, "sigma": f.sigma, "ci95": f.ci95, "D": f.D, "D0": f.D0,
+            "explained": f.explained, "score": f.score, "lowers": f.lowers(), "at_edge": f.at_edge,
+            "passes": f.passes(), "gof_p": f.gof_p, "screened_only": f.screened, "alternatives": f.alternatives,
             "evaluations": len(f.points)}
 
 
 def to_dict(result: DiscrepancyResult) -> dict[str, Any]:
     rounds = [{"before": r.before.to_dict(), "verdict": r.verdict, "ranking": [_fit_dict(f) for f in r.fits],
                "added": r.added.effect.name if r.added else None} for r in result.rounds]
-    return {"settings": result.settings, "source": result.measured.source, "rounds": rounds,
-            "added": [{"effect": a.effect.name, "values": dict(a.values)} for a in result.added],
+    inter = result.interactions
+    return {"settings": result.settings, "source": result.measured.source, "summary": result.summary(),
+            "rounds": rounds, "added": [{"effect": a.effect.name, "values": dict(a.values)} for a in result.added],
+            "final_search": result.final.to_dict(),
+            "interactions": None if inter is None else {k: c.to_dict() for k, c in inter.comparisons.items()},
             "show": {"before": result.before.to_dict(), "after": result.after.to_dict(), "shrink": result.shrink}}
 
 
@@ -53,17 +61,21 @@ def _fitted(f: EffectFit) -> str:
     parts = []
     for p in f.effect.fitted:
         s = f.sigma.get(p.name, float("nan"))
-        parts.append(f"{p.name} = {f.values[p.name]:.4g}" + ("" if np.isnan(s) else f" +- {s:.2g}") + f" {p.unit}")
-    return ", ".join(parts)
+        edge = " (at range edge)" if p.name in f.at_edge else ""
+        parts.append(f"{p.name} = {f.values[p.name]:.4g}" + ("" if np.isnan(s) else f" +- {s:.2g}") + f" {p.unit}"
+                     + edge)
+    return ", ".join(parts) + (" (screened)" if f.screened else "")
 
 
 def _gaps_table(c: Comparison) -> list[str]:
-    lines = [_row("condition", "compared", "simulated", "measured", "difference (95% CI)", "t (df)", "p", "Holm p",
-                  "gap"), _row(*["---"] * 9)]
+    lines = [_row("condition", "compared", "simulated", "measured", "difference (95% CI)", "t (df)", "test",
+                  "Holm p mean", "SD sim / meas", "z spread", "Holm p spread", "gap"), _row(*["---"] * 12)]
     for g in c.gaps:
+        sd = f"{g.simulated_sd:.3f} / {g.measured_sd:.3f}" if g.measured_sd is not None else f"{g.simulated_sd:.3f} / -"
         lines.append(_row(g.condition, g.compared, f"{g.simulated:.3f}", f"{g.measured:.3f}",
-                          f"{g.difference:+.3f} (+- {g.ci95:.3f})", f"{g.t:+.2f} ({g.df:.1f})", f"{g.p:.3g}",
-                          f"{g.p_holm:.3g}", "**yes**" if g.p_holm < c.alpha else "no"))
+                          f"{g.difference:+.3f} (+- {g.ci95:.3f})", f"{g.t:+.2f} ({g.df:.1f})", g.test,
+                          f"{g.p_holm:.3g}", sd, f"{g.z_spread:+.2f}", f"{g.p_spread_holm:.3g}",
+                          f"**{g.kinds(c.alpha)}**" if g.significant(c.alpha) else "no"))
     return lines
 
 
@@ -71,28 +83,52 @@ def _round(i: int, r: Round) -> list[str]:
     lines = [f"### Round {i}", "", f"Find (D = {r.before.D:.2f} over {len(r.before.gaps)} conditions):", "",
              *_gaps_table(r.before), ""]
     if r.fits:
-        lines += ["Name (every candidate effect fitted; ranked by D + 2k):", "",
-                  _row("rank", "effect", "fitted (+- 1 sigma)", "D", "D0 - D", "explained", "D + 2k", "passes",
-                       "also fits"), _row(*["---"] * 9)]
+        lines += ["Name (every candidate effect screened, the best refined; ranked by D + 2k):", "",
+                  _row("rank", "effect", "fitted (+- 1 sigma)", "D", "D0 - D", "explained", "D + 2k", "GOF p",
+                       "passes", "also fits"), _row(*["---"] * 10)]
         for k, f in enumerate(r.fits, start=1):
             also = "; ".join(", ".join(f"{n} {v:.3g}" for n, v in a.items()) for a in f.alternatives) or "-"
+            verdict = "yes" if f.passes() else ("edge" if f.lowers() and f.at_edge else "no")
             lines.append(_row(k, f.effect.name, _fitted(f), f"{f.D:.2f}", f"{f.reduction:.2f}",
-                              f"{100 * f.explained:.0f} %", f"{f.score:.2f}", "yes" if f.passes() else "no", also))
+                              f"{100 * f.explained:.0f} %", f"{f.score:.2f}", f"{f.gof_p:.2g}", verdict, also))
         lines.append("")
     return [*lines, f"Verdict: {r.verdict}.", ""]
+
+
+def _interactions(result: DiscrepancyResult) -> list[str]:
+    """Which effect closes which part of each gap: the difference per condition with each alone and together."""
+    inter = result.interactions
+    names = list(inter.alone)
+    lines = ["", "## The added effects alone and together (search eyes)", "",
+             f"D without effects {inter.D0:.2f}; " + "; ".join(f"{n} alone {d:.2f}" for n, d in inter.alone.items())
+             + f"; together {inter.together:.2f}; interaction (D0 - D_all - sum of the drops alone) "
+             f"{inter.interaction:+.2f}.", "",
+             _row("condition", "difference without", *[f"with {n} alone" for n in names], "with all"),
+             _row(*["---"] * (len(names) + 3))]
+    first = result.rounds[0].before
+    for i, g in enumerate(first.gaps):
+        cells = [f"{inter.comparisons[n].gaps[i].difference:+.3f}" for n in names]
+        lines.append(_row(g.compared, f"{g.difference:+.3f}", *cells,
+                          f"{inter.comparisons['together'].gaps[i].difference:+.3f}"))
+    return lines
 
 
 def render_markdown(result: DiscrepancyResult, png: str) -> str:
     """The report: data, rounds (find, name, add), the show comparison, the effects, the figure."""
     s, m = result.settings, result.measured
-    lines = [f"# Discrepancy workflow: {s['experiment']}", "", f"Measured data: {m.source} "
+    named = ", ".join(a.label() for a in result.named) or "none"
+    lines = [f"# Discrepancy workflow: {s['experiment']}", "", f"**Outcome: {result.outcome}** ({result.reason}). "
+             f"Named effects, largest first: {named}.", "", f"Measured data: {m.source} "
              f"({len(m.conditions)} conditions{', paired by subject' if m.paired else ''}).", "",
              f"Settings: {s['search_eyes']} search eyes, {s['eyes']} show eyes, up to {s['rounds']} rounds, "
              f"family-wise alpha {s['alpha']}, noise seed {s['seed']}, {s['evaluations']} evaluations "
              "(each a simulation and a calibration of the search eyes).", "",
-             "D = sum of t^2 over the conditions (analysis/discrepancy/stats.py). An effect passes when it lowers D, "
-             "divided by the misfit scale s^2 = max(1, D / (n - k)), by more than the 95 % point of chi-square(k) "
-             "for its k fitted parameters; the best-ranked effect that passes is added (docs/discrepancy.md).", "",
+             "D = sum over conditions of the squared normal scores of the mean and the spread tests "
+             "(analysis/discrepancy/stats.py). The top-ranked effect is added when it lowers D, divided by the "
+             "misfit scale s^2 = max(1, D / (n - k)), by more than the 95 % point of chi-square(k) for its k fitted "
+             "parameters and no parameter is at the edge of its plausible range. The outcome is 'explained' only if "
+             f"no significant gap is left and P(chi-square) of the final D >= {s.get('alpha_gof', 0.01)} "
+             "(docs/discrepancy.md).", "",
              "## Rounds", ""]
     for i, r in enumerate(result.rounds, start=1):
         lines += _round(i, r)
@@ -106,15 +142,17 @@ def render_markdown(result: DiscrepancyResult, png: str) -> str:
     for b, a in zip(result.before.gaps, result.after.gaps, strict=True):
         lines.append(_row(b.compared, f"{b.measured:.3f}", f"{b.simulated:.3f}", f"{b.p_holm:.3g}",
                           f"{a.simulated:.3f}", f"{a.p_holm:.3g}"))
+    if result.interactions is not None:
+        lines += _interactions(result)
     if m.extra.get("hidden"):
         lines += ["", f"Truth (hidden from the workflow): {', '.join(m.extra['hidden'])}."]
-    lines += ["", "## Effects in the registry", "", _row("effect", "parameters (unit, default, range)", "reference"),
-              _row("---", "---", "---")]
+    lines += ["", "## Effects in the catalogue", "",
+              _row("effect", "parameters (unit, default, range)", "prior", "reference"), _row(*["---"] * 4)]
     for name in registry.names():
         e = registry.get(name)
         params = "; ".join(f"{p.name} ({p.unit or '-'}, {p.default:g}, [{p.low:g}, {p.high:g}]"
                            f"{'' if p.fitted else ', fixed'})" for p in e.parameters)
-        lines.append(_row(f"{name}: {e.summary()}", params, e.reference))
+        lines.append(_row(f"{name}: {e.summary()}", params, e.prior, e.reference))
     return "\n".join([*lines, "", f"![{png}]({png})", ""])
 
 
@@ -140,7 +178,7 @@ def figure(result: DiscrepancyResult, path: Path) -> Path:
 
 
 def _profiles(ax, result: DiscrepancyResult) -> None:
-    fits = [f for r in result.rounds[:1] for f in r.fits]
+    fits = [f for r in result.rounds[:1] for f in r.fits][:6]  # the six best ranked
     for f in fits:
         p = f.effect.fitted[0]
         x = (f.points[:, 0] - p.low) / (p.high - p.low)

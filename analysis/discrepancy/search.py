@@ -1,26 +1,39 @@
-"""Fit effects' parameters to minimise the gap measure D: bounded grids, halving refinements, a quadratic.
+"""Fit effects' parameters to minimise the gap measure D: a screen on a surrogate, then true refinements.
 
 Every evaluation is a simulation and a calibration, so the search is small and batched: `search_effects`
 runs one `EffectSearch` per effect in lock-step and hands all their points of a stage to one `evaluate`
 call (one batched calibration for every effect's points). Per effect, with P = 1 or 2 fitted parameters:
 
-1. Coarse grid: `COARSE[P]` points per parameter over the plausible range [low, high] (9, or 3 x 3).
-2. `REFINE` refinements: the neighbours of the best point so far at h = step/2, step/4, step/8 (2 or 8
-   points each, clipped to the range).
-3. A quadratic D(u) = c + g.u + u.H.u / 2 (u in units of the last h = step/8) fitted by least squares to
+1. Screen: `NODES[P]` evaluated nodes over the plausible range [low, high] (5, or 3 x 3). Every per-eye
+   condition value is interpolated between the nodes (a cubic spline through 5 nodes; a tensor-product
+   quadratic through 3 x 3), and D of the interpolated conditions is minimised on a dense grid (`DENSE[P]`
+   points per parameter): the surrogate optimum, without further simulations (the conditions are smooth
+   in the parameters: averages over fixations of smooth functions of the features).
+2. The `TOP` effects of lowest screened score (D + 2k at the surrogate optimum or the best node) go on
+   (`continue_search`): their surrogate optimum is evaluated, then `REFINE` refinements evaluate the
+   neighbours of the best point so far at h = step/4, step/8, step/16 (2 or 8 points each, clipped to the
+   range).
+3. A quadratic D(u) = c + g.u + u.H.u / 2 (u in units of the last h = step/16) fitted by least squares to
    the evaluated points within h of the best (2h or 4h if too few: at a bound); if H is positive definite
    its minimum (kept within that window and the range) is evaluated; the best evaluated point is the
    estimate. The curvature gives a 1-sigma uncertainty sqrt(diag(2 H_theta^-1)) (Delta D = 1, D read as
    a chi-square); NaN if the parabola is not convex or its minimum is on a bound.
-4. Alternatives: coarse points more than 1.5 coarse steps away whose D is within 1 of the best (e.g. the
-   mirror sign of an effect that only error magnitudes see): the data cannot tell them apart.
+4. Alternatives: nodes more than 1.5 node steps away whose D is within 1 of the best (e.g. the mirror sign
+   of an effect that only error magnitudes see): the data cannot tell them apart.
+
+An effect that is screened out keeps its best node (or the surrogate optimum's D, marked `screened`) and
+no uncertainty; it ranks below every refined effect of equal score only by its (higher) D.
 
 Ranking (`EffectFit.score`): D at the estimate plus 2 per fitted parameter (AIC-like, D read as -2 log
 likelihood up to a constant). An effect is worth adding only if it lowers D by more than the 95 % point of
 chi-square(k) (`EffectFit.passes`), after dividing by the squared scale factor s^2 = max(1, D / (n - k))
-(n conditions): when the model with the effect still misfits far beyond sampling, D's scale is inflated
+(n terms of D): when the model with the effect still misfits far beyond sampling, D's scale is inflated
 and so is every drop of D (the scale factor of least squares with an unknown variance; the Particle Data
-Group's practice). The reported 1-sigma uncertainties are multiplied by s.
+Group's practice); and only if no fitted parameter ends within `EDGE` (a fraction of its range) of a
+bound of its plausible range (`EffectFit.at_edge`): a fit that wants to leave the plausible range is
+evidence against the effect, not a measurement of it. The reported 1-sigma uncertainties are multiplied
+by s; `EffectFit.ci95` is 1.96 of them. `EffectFit.gof_p` is the goodness of fit of the model with the
+effect: P(chi-square(n - k) >= D).
 """
 
 from __future__ import annotations
@@ -34,13 +47,19 @@ from scipy import stats as sps
 
 from eyehil.emulator.effects import Applied, Effect
 
-COARSE = {1: 9, 2: 3}
-REFINE = 3
+NODES = {1: 5, 2: 3}
+DENSE = {1: 65, 2: 25}
+REFINE = (2, 3, 4)  # refinement steps h = step / 2**r
+TOP = 3
+EDGE = 0.01
+
+Metrics = dict[str, np.ndarray]
 
 
 @dataclass(frozen=True, eq=False)
 class EffectFit:
-    """The fitted effect: every parameter's value, 1-sigma of the fitted ones, D before (D0) and at the fit."""
+    """The fitted effect: every parameter's value, 1-sigma of the fitted ones, D before (D0) and at the fit;
+    `n_conditions` is the number of terms of D."""
 
     effect: Effect
     values: dict[str, float]
@@ -51,6 +70,7 @@ class EffectFit:
     points: np.ndarray  # (G, P) evaluated fitted-parameter values
     Ds: np.ndarray  # (G,) D at each
     alternatives: list[dict[str, float]] = field(default_factory=list)
+    screened: bool = False  # only screened (surrogate), not refined
 
     @property
     def k(self) -> int:
@@ -76,9 +96,35 @@ class EffectFit:
         dof = self.n_conditions - self.k
         return float(np.sqrt(max(1.0, self.D / dof))) if dof > 0 else 1.0
 
-    def passes(self, level: float = 0.95) -> bool:
+    @property
+    def at_edge(self) -> list[str]:
+        """Fitted parameters within `EDGE` of their range's ends (the neutral end excepted: that is "no
+        effect", which the drop criterion already refuses)."""
+        out = []
+        for p in self.effect.fitted:
+            v, margin = self.values[p.name], EDGE * (p.high - p.low)
+            if (v <= p.low + margin and p.low != p.neutral) or (v >= p.high - margin and p.high != p.neutral):
+                out.append(p.name)
+        return out
+
+    @property
+    def ci95(self) -> dict[str, float]:
+        """Half-widths of the 95 % intervals of the fitted parameters (1.96 sigma; NaN if unknown)."""
+        return {k: 1.96 * s for k, s in self.sigma.items()}
+
+    @property
+    def gof_p(self) -> float:
+        """P(chi-square(n - k) >= D): the goodness of fit with this effect (1 with no dof left)."""
+        dof = self.n_conditions - self.k
+        return float(sps.chi2.sf(self.D, dof)) if dof > 0 else 1.0
+
+    def lowers(self, level: float = 0.95) -> bool:
         """(D0 - D) / scale^2 above the `level` point of chi-square(k)."""
         return self.reduction / self.scale**2 > float(sps.chi2.ppf(level, self.k))
+
+    def passes(self, level: float = 0.95) -> bool:
+        """Lowers D enough (`lowers`) and no fitted parameter is at its range's edge."""
+        return self.lowers(level) and not self.at_edge
 
     @property
     def applied(self) -> Applied:
@@ -86,37 +132,70 @@ class EffectFit:
 
 
 class EffectSearch:
-    """One effect's search as a state machine: `ask()` the next points (None when done), `tell(D)`."""
+    """One effect's search as a state machine: `ask()` the next points (None when done), `tell(D, metrics)`."""
 
     def __init__(self, effect: Effect, D0: float, n_conditions: int):
         self.effect, self.D0, self.n_conditions = effect, D0, n_conditions
         params = effect.fitted
         self.lo, self.hi = np.array([p.low for p in params]), np.array([p.high for p in params])
-        n = COARSE[len(params)]
+        n = NODES[len(params)]
         self.step = (self.hi - self.lo) / (n - 1)
-        axes = [np.linspace(a, b, n) for a, b in zip(self.lo, self.hi, strict=True)]
-        self.coarse = np.array(list(itertools.product(*axes)))
+        self.axes = [np.linspace(a, b, n) for a, b in zip(self.lo, self.hi, strict=True)]
+        self.coarse = np.array(list(itertools.product(*self.axes)))
         self.points, self.Ds = np.empty((0, len(params))), np.empty(0)
         self.stage, self.sigma = 0, np.full(len(params), np.nan)
-        self._pending = self.coarse
+        self.surrogate: tuple[np.ndarray, float] | None = None
+        self.node_metrics: list[Metrics] = []
+        self._pending: np.ndarray | None = self.coarse
+        self.screened = False
 
     @property
     def best(self) -> np.ndarray:
         return self.points[np.argmin(self.Ds)]
 
+    @property
+    def screen_score(self) -> float:
+        """D + 2k at the better of the best node and the surrogate optimum."""
+        d = float(np.min(self.Ds))
+        if self.surrogate is not None:
+            d = min(d, self.surrogate[1])
+        return d + 2 * len(self.effect.fitted)
+
     def ask(self) -> np.ndarray | None:
         return self._pending
 
-    def tell(self, Ds: np.ndarray) -> None:
+    def tell(self, Ds: np.ndarray, metrics: Sequence[Metrics] | None = None,
+             score: Callable[[Metrics], float] | None = None) -> None:
         self.points = np.vstack([self.points, self._pending])
         self.Ds = np.concatenate([self.Ds, np.asarray(Ds, float)])
         self._pending = None
-        while self._pending is None and self.stage <= REFINE:
-            self.stage += 1
-            self._pending = self._refinement() if self.stage <= REFINE else self._quadratic()
+        if self.stage == 0:
+            if metrics is not None and score is not None:
+                self.surrogate = surrogate_minimum(self.axes, list(metrics), score, DENSE[len(self.lo)])
+            self.screened = True  # waits for `continue_search`
+            return
+        self._advance()
 
-    def _refinement(self) -> np.ndarray | None:
-        h = self.step / 2**self.stage
+    def continue_search(self) -> None:
+        """Leave the screen: evaluate the surrogate optimum, then refine."""
+        self.screened = False
+        self.stage = 1
+        start = self.surrogate[0] if self.surrogate is not None else self.best
+        self._pending = self._new(np.clip(start, self.lo, self.hi)[None])
+        if self._pending is None:
+            self._advance()
+
+    def _advance(self) -> None:
+        """Stages: 0 screen, 1 surrogate optimum, 2.. refinements, then the quadratic's minimum."""
+        while self._pending is None and self.stage <= len(REFINE) + 1:
+            self.stage += 1
+            r = self.stage - 2
+            if r < len(REFINE):
+                self._pending = self._refinement(self.step / 2 ** REFINE[r])
+            else:
+                self._pending = self._quadratic()
+
+    def _refinement(self, h: np.ndarray) -> np.ndarray | None:
         offsets = np.array(list(itertools.product((-1.0, 0.0, 1.0), repeat=len(h))))
         return self._new(np.clip(self.best + offsets * h, self.lo, self.hi))
 
@@ -126,23 +205,60 @@ class EffectSearch:
         return np.array(new) if new else None
 
     def _quadratic(self) -> np.ndarray | None:
-        h = self.step / 2**REFINE
-        best = self.best
-        estimate, self.sigma = quadratic_minimum(self.points, self.Ds, best, h, self.lo, self.hi)
+        h = self.step / 2 ** REFINE[-1]
+        estimate, self.sigma = quadratic_minimum(self.points, self.Ds, self.best, h, self.lo, self.hi)
         return None if estimate is None else self._new(estimate[None])
 
     def result(self) -> EffectFit:
         i = int(np.argmin(self.Ds))
-        sigma = self.sigma  # the curvature near the best point (NaN if the parabola was not convex)
         fitted = self.effect.fitted
-        values = self.effect.values({p.name: float(v) for p, v in zip(fitted, self.points[i], strict=True)})
+        point, D = self.points[i], float(self.Ds[i])
+        if self.screened and self.surrogate is not None and self.surrogate[1] < D:
+            point, D = self.surrogate
+        values = self.effect.values({p.name: float(v) for p, v in zip(fitted, point, strict=True)})
         n = len(self.coarse)
-        far = np.any(np.abs(self.coarse - self.points[i]) > 1.5 * self.step, axis=1) & (self.Ds[:n] < self.Ds[i] + 1)
+        far = np.any(np.abs(self.coarse - point) > 1.5 * self.step, axis=1) & (self.Ds[:n] < D + 1)
         alternatives = [{p.name: float(v) for p, v in zip(fitted, c, strict=True)} for c in self.coarse[far]]
         dof = self.n_conditions - len(fitted)
-        scale = np.sqrt(max(1.0, self.Ds[i] / dof)) if dof > 0 else 1.0
+        scale = np.sqrt(max(1.0, D / dof)) if dof > 0 else 1.0
+        sigma = np.full(len(fitted), np.nan) if self.screened else self.sigma
         return EffectFit(self.effect, values, {p.name: float(s * scale) for p, s in zip(fitted, sigma, strict=True)},
-                         float(self.Ds[i]), float(self.D0), self.n_conditions, self.points, self.Ds, alternatives)
+                         float(D), float(self.D0), self.n_conditions, self.points, self.Ds, alternatives,
+                         self.screened)
+
+
+def surrogate_minimum(axes: list[np.ndarray], metrics: list[Metrics], score: Callable[[Metrics], float],
+                      dense: int) -> tuple[np.ndarray, float]:
+    """The minimum of score(interpolated conditions) on a dense grid over the nodes' range: (point, D)."""
+    keys = list(metrics[0])
+    values = {k: np.array([m[k] for m in metrics], float) for k in keys}  # (nodes, E)
+    if len(axes) == 1:
+        x = axes[0]
+        grid = np.linspace(x[0], x[-1], dense)
+        from scipy.interpolate import make_interp_spline
+
+        inter = {k: make_interp_spline(x, np.nan_to_num(v, nan=np.nanmean(v)), k=min(3, len(x) - 1), axis=0)(grid)
+                 for k, v in values.items()}
+        points = grid[:, None]
+    else:
+        u = [np.linspace(a[0], a[-1], dense) for a in axes]
+        weights = [_lagrange(a, g) for a, g in zip(axes, u, strict=True)]  # (dense, 3) each
+        w = np.einsum("ai,bj->abij", *weights).reshape(dense * dense, -1)  # node order of itertools.product
+        inter = {k: w @ np.nan_to_num(v, nan=np.nanmean(v)) for k, v in values.items()}
+        points = np.array(list(itertools.product(*u)))
+    Ds = np.array([score({k: inter[k][j] for k in keys}) for j in range(len(points))])
+    j = int(np.nanargmin(Ds))
+    return points[j], float(Ds[j])
+
+
+def _lagrange(nodes: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Lagrange basis weights (len(x), len(nodes)) of the polynomial through `nodes`."""
+    out = np.ones((len(x), len(nodes)))
+    for i, xi in enumerate(nodes):
+        for j, xj in enumerate(nodes):
+            if i != j:
+                out[:, i] *= (x - xj) / (xi - xj)
+    return out
 
 
 def quadratic_minimum(points, Ds, best, h, lo, hi) -> tuple[np.ndarray | None, np.ndarray]:
@@ -171,22 +287,39 @@ def quadratic_minimum(points, Ds, best, h, lo, hi) -> tuple[np.ndarray | None, n
     return estimate, np.where(on_bound, np.nan, sigma)
 
 
-def max_evaluations(effect: Effect) -> int:
-    """Evaluations of one effect's search at most: coarse grid, refinements, the quadratic's minimum."""
+def max_evaluations(effect: Effect, refined: bool = True) -> int:
+    """Evaluations of one effect's search at most: nodes, and if refined the surrogate optimum, the
+    refinements and the quadratic's minimum."""
     P = len(effect.fitted)
-    return COARSE[P] ** P + REFINE * (3**P - 1) + 1
+    return NODES[P] ** P + (1 + len(REFINE) * (3**P - 1) + 1 if refined else 0)
 
 
-def search_effects(effects: Sequence[Effect], evaluate: Callable[[list[Applied]], np.ndarray], D0: float,
-                   n_conditions: int) -> list[EffectFit]:
-    """Fit every effect; `evaluate(applied list)` returns D for each applied effect (one batch per stage)."""
+def search_effects(effects: Sequence[Effect], evaluate: Callable[[list[Applied]], list[Metrics]],
+                   score: Callable[[Metrics], float], D0: float, n_conditions: int, top: int = TOP,
+                   progress: Callable[[int], None] | None = None) -> list[EffectFit]:
+    """Fit every effect (module docstring); `evaluate(applied list)` returns the conditions of each applied
+    effect (one batch per stage), `score(conditions)` their D; `progress(n)` after each batch."""
     searches = [EffectSearch(e, D0, n_conditions) for e in effects]
-    while asks := [(s, s.ask()) for s in searches if s.ask() is not None]:
+    while True:
+        asks = [(s, s.ask()) for s in searches if s.ask() is not None]
+        if not asks:
+            waiting = [s for s in searches if s.screened and s.stage == 0]
+            if not waiting:
+                break
+            for s in sorted(waiting, key=lambda s: s.screen_score)[:top]:
+                s.continue_search()
+            for s in waiting:
+                if s.screened:
+                    s.stage = -1  # screened out: done
+            continue
         batch = [Applied.of(s.effect, dict(zip((p.name for p in s.effect.fitted), map(float, row), strict=True)))
                  for s, pts in asks for row in pts]
-        Ds = evaluate(batch)
+        metrics = evaluate(batch)
+        if progress is not None:
+            progress(len(batch))
         start = 0
         for s, pts in asks:
-            s.tell(Ds[start:start + len(pts)])
+            part = metrics[start:start + len(pts)]
+            s.tell(np.array([score(m) for m in part]), part, score)
             start += len(pts)
     return [s.result() for s in searches]

@@ -1,27 +1,47 @@
-"""Where a simulation and measured data disagree: one test per condition and a chi-square-like gap measure.
+"""Where a simulation and measured data disagree: tests of the mean and the spread per condition, and the gap
+measure D (a sum of squared normal scores, read as a chi-square).
 
 Per condition c (degrees), the compared quantity is the condition itself, or, for paired measured data
 and a condition with a reference r (H2 and head:* refer to H1), the within-subject difference c - r,
 computed the same way for every simulated eye and every measured subject. Then:
 
-- per-subject measured values, or a summary with an SD: Welch's t-test of the simulated mean against the
-  measured mean (`eyehil.analysis.study.stats.welch_t_test_from_stats`; Welch-Satterthwaite df);
-- a summary without an SD (Blignaut 2014's published means): the one-sample t-test of the simulated eyes
-  against the measured mean, t = (mean - mu) / (s / sqrt(n)), df = n - 1, as the published study did.
+- **mean**: Welch's t of the simulated mean against the measured mean (Welch-Satterthwaite df), from
+  per-subject values or a summary with an SD; a summary without an SD (Blignaut 2014's published means)
+  gets the one-sample t of the simulated eyes against the measured mean, df = n - 1.
+- **spread** (per-subject values or a summary with an SD): the log ratio of the SDs,
+  z_s = ln(s_sim / s_meas) / se, se^2 = sum over both samples of (2 / (n - 1) + g2 / n) / 4, with g2 the
+  pooled excess kurtosis of the mean-centred samples, floored at 0 (Bonett 2006, Applied Psychological
+  Measurement 30(5):432-439: the kurtosis-robust standard error of a log SD ratio). Without a measured
+  SD there is no spread term.
 
-SDs below `SD_FLOOR_DEG` are raised to it (a noiseless contrast can be exactly 0.0). p-values are two-sided;
-`p_holm` is Holm's step-down adjustment over the compared conditions (family-wise error `alpha`), and a
-gap is significant when p_holm < alpha.
+The normal score of the mean term is z_m = Phi^-1(F_t(t; df)) (the t's own tail turned into a normal
+deviate, so four subjects' heavy-tailed t does not dominate D); for huge t whose tail underflows, z_m = t.
+The gap measure is D = sum_c (z_m^2 + z_s^2): under "no gap" each term is about chi-square(1), and a
+change of the model that widens the simulated spread to shrink every t (added noise) pays in z_s what it
+saves in z_m. Conditions share subjects, so the terms are correlated and D is a chi-square only roughly.
 
-The gap measure is D = sum_c t_c^2. Were the conditions independent and the t's normal, D would follow a
-chi-square with one degree of freedom per condition under "no gap", and the drop of D when an effect with k
-fitted parameters is added would follow chi-square(k) if the effect were absent: a likelihood-ratio-like
-criterion. Conditions sharing subjects are correlated and small samples make t heavier-tailed than
-normal, so D is a ranking measure with a calibrated-looking scale, not an exact test.
+**Significance** (`tests=True`, the find and show steps): where both samples are per-subject values,
+p-values come from a Monte Carlo permutation test (`PERMUTATIONS` random relabellings of the pooled
+values, seeded by the condition name; p = (1 + #{|stat*| >= |stat|}) / (B + 1)), of the Welch t for the
+mean and, on the mean-centred values, of ln(s1 / s2) for the spread. Under "no gap" (the two samples from
+one distribution) this is exact up to the Monte Carlo error, whatever the skew of the errors and however
+few the subjects, which the t-distribution is not (four skewed values gave spurious gaps). Otherwise the
+parametric p of the statistic above. All mean and spread p-values of a comparison form one family, Holm
+adjusted (`holm`); a gap is significant when its p_holm < alpha. `tests=False` (every point of a search)
+skips the permutations and keeps the parametric p.
+
+**Goodness of fit** (`permutation_gof`): the terms of D are correlated (conditions share subjects; the
+same quantity at several head positions), so D is not a chi-square with one degree of freedom per term.
+Where every measured condition has per-subject values, the null distribution of D itself is drawn by
+relabelling whole units (a simulated eye or a measured subject with all its conditions together) between
+the two samples (`GOF_PERMUTATIONS` relabellings): p = (1 + #{D* >= D}) / (B + 1). The correlations are
+kept, so no independence is assumed; the fitted parameters make the observed D slightly small, so the
+test is conservative toward "fits". Otherwise the chi-square reading (`Comparison.gof_p`).
 """
 
 from __future__ import annotations
 
+import zlib
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, replace
 
@@ -32,11 +52,13 @@ from eyehil.analysis.discrepancy.data import Measured
 from eyehil.analysis.study.stats import welch_t_test_from_stats
 
 SD_FLOOR_DEG = 1e-4
+PERMUTATIONS = 4000
+GOF_PERMUTATIONS = 200
 
 
 @dataclass(frozen=True)
 class ConditionGap:
-    """One condition: what was compared, both means (deg), the test and its Holm-adjusted p."""
+    """One condition: what was compared, both means and SDs (deg), the mean and spread tests."""
 
     condition: str
     compared: str
@@ -50,7 +72,11 @@ class ConditionGap:
     t: float
     df: float
     p: float
+    z: float = float("nan")  # the normal score of the mean term
+    z_spread: float = float("nan")  # ln(s_sim / s_meas) / se, NaN without a measured SD
+    p_spread: float = float("nan")
     p_holm: float = float("nan")
+    p_spread_holm: float = float("nan")
 
     @property
     def difference(self) -> float:
@@ -63,10 +89,26 @@ class ConditionGap:
         se = abs(self.difference / self.t) if self.t else 0.0
         return float(sps.t.ppf(0.975, max(self.df, 1.0)) * se)
 
+    @property
+    def term(self) -> float:
+        """This condition's share of D: z^2 + z_spread^2."""
+        return float(self.z**2 + (0.0 if np.isnan(self.z_spread) else self.z_spread**2))
+
+    @property
+    def n_terms(self) -> int:
+        return 1 + (0 if np.isnan(self.z_spread) else 1)
+
+    def significant(self, alpha: float) -> bool:
+        return bool(self.p_holm < alpha or self.p_spread_holm < alpha)
+
+    def kinds(self, alpha: float) -> str:
+        """Which of mean / spread is significant ("mean", "spread", "mean+spread" or "")."""
+        return "+".join(k for k, p in (("mean", self.p_holm), ("spread", self.p_spread_holm)) if p < alpha)
+
 
 @dataclass(frozen=True)
 class Comparison:
-    """Every condition's gap, the family-wise `alpha`, and the gap measure D = sum t^2."""
+    """Every condition's gap, the family-wise `alpha`, and the gap measure D = sum of squared normal scores."""
 
     gaps: tuple[ConditionGap, ...]
     alpha: float
@@ -74,40 +116,69 @@ class Comparison:
 
     @property
     def significant(self) -> list[ConditionGap]:
-        return [g for g in self.gaps if g.p_holm < self.alpha]
+        return [g for g in self.gaps if g.significant(self.alpha)]
+
+    @property
+    def n_terms(self) -> int:
+        """Terms of D (a mean term per condition, a spread term where the measured SD is known)."""
+        return sum(g.n_terms for g in self.gaps)
+
+    def gof_p(self, k: int = 0) -> float:
+        """Goodness of fit: P(chi-square(n_terms - k) >= D) (1 when no degrees of freedom are left)."""
+        dof = self.n_terms - k
+        return float(sps.chi2.sf(self.D, dof)) if dof > 0 else 1.0
 
     def gap(self, condition: str) -> ConditionGap:
         return next(g for g in self.gaps if g.condition == condition)
 
     def to_dict(self) -> dict:
-        return {"D": self.D, "alpha": self.alpha, "significant": [g.condition for g in self.significant],
-                "conditions": [{**asdict(g), "difference": g.difference, "ci95": g.ci95} for g in self.gaps]}
+        return {"D": self.D, "n_terms": self.n_terms, "gof_p": self.gof_p(), "alpha": self.alpha,
+                "significant": [g.condition for g in self.significant],
+                "conditions": [{**asdict(g), "difference": g.difference, "ci95": g.ci95,
+                                "significant": g.kinds(self.alpha)} for g in self.gaps]}
 
 
 def holm(p: np.ndarray) -> np.ndarray:
-    """Holm's step-down adjusted p-values: p_(i) * (m - i + 1), made monotone, capped at 1."""
+    """Holm's step-down adjusted p-values: p_(i) * (m - i + 1), made monotone, capped at 1 (NaN kept)."""
     p = np.asarray(p, float)
-    order = np.argsort(p)
-    scaled = p[order] * (len(p) - np.arange(len(p)))
-    adjusted = np.empty_like(p)
-    adjusted[order] = np.minimum(np.maximum.accumulate(scaled), 1.0)
-    return adjusted
+    out = np.full_like(p, np.nan)
+    ok = np.flatnonzero(np.isfinite(p))
+    order = ok[np.argsort(p[ok])]
+    scaled = p[order] * (len(ok) - np.arange(len(ok)))
+    out[order] = np.minimum(np.maximum.accumulate(scaled), 1.0)
+    return out
+
+
+def normal_score(t: float, df: float) -> float:
+    """Phi^-1(F_t(t; df)) with the sign of t; t itself where the tail underflows."""
+    tail = float(sps.t.sf(abs(t), df))
+    z = float(sps.norm.isf(tail)) if tail > 1e-300 else abs(t)
+    return float(np.copysign(min(z, abs(t)), t))
+
+
+def excess_kurtosis(*samples: np.ndarray) -> float:
+    """Pooled excess kurtosis of the mean-centred samples, floored at 0."""
+    x = np.concatenate([s - s.mean() for s in samples])
+    m2 = np.mean(x**2)
+    return max(0.0, float(np.mean(x**4) / m2**2 - 3.0)) if m2 > 0 else 0.0
+
+
+def log_sd_se(n1: int, n2: int, g2: float) -> float:
+    """Standard error of ln(s1 / s2) (Bonett 2006), excess kurtosis g2."""
+    return float(np.sqrt(sum((2.0 / (n - 1) + g2 / n) / 4.0 for n in (n1, n2))))
 
 
 def compare(simulated: Mapping[str, np.ndarray], measured: Measured, reference: Callable[[str], str | None],
-            alpha: float = 0.05) -> Comparison:
+            alpha: float = 0.05, tests: bool = True) -> Comparison:
     """Test every measured condition against the simulated per-eye values (module docstring)."""
-    gaps = [_gap(name, simulated, measured, reference) for name in measured.conditions]
-    adjusted = holm(np.array([g.p for g in gaps]))
-    return Comparison(tuple(_with_p_holm(g, p) for g, p in zip(gaps, adjusted, strict=True)), alpha,
-                      float(sum(g.t**2 for g in gaps)))
+    gaps = [_gap(name, simulated, measured, reference, tests) for name in measured.conditions]
+    adjusted = holm(np.array([g.p for g in gaps] + [g.p_spread for g in gaps]))
+    n = len(gaps)
+    gaps = [replace(g, p_holm=float(adjusted[i]), p_spread_holm=float(adjusted[n + i])) for i, g in enumerate(gaps)]
+    return Comparison(tuple(gaps), alpha, float(sum(g.term for g in gaps)))
 
 
-def _with_p_holm(g: ConditionGap, p: float) -> ConditionGap:
-    return replace(g, p_holm=float(p))
-
-
-def _gap(name: str, simulated: Mapping[str, np.ndarray], measured: Measured, reference) -> ConditionGap:
+def _gap(name: str, simulated: Mapping[str, np.ndarray], measured: Measured, reference, tests: bool) -> ConditionGap:
     if name not in simulated:
         raise ValueError(f"the simulation has no condition {name!r}; it has {', '.join(simulated)}")
     cond = measured.conditions[name]
@@ -121,14 +192,76 @@ def _gap(name: str, simulated: Mapping[str, np.ndarray], measured: Measured, ref
     meas = cond.values - measured.conditions[ref].values if paired else cond.values
     compared = f"{name} - {ref} (paired)" if paired else name
     s_sd = max(float(sim.std(ddof=1)), SD_FLOOR_DEG)
-    if meas is not None or cond.sd is not None:
-        m_mean = float(meas.mean()) if meas is not None else cond.mean
-        m_sd = max(float(meas.std(ddof=1)) if meas is not None else float(cond.sd), SD_FLOOR_DEG)
-        m_n = meas.size if meas is not None else cond.n
-        w = welch_t_test_from_stats(float(sim.mean()), s_sd, sim.size, m_mean, m_sd, m_n)
-        return ConditionGap(name, compared, "welch", float(sim.mean()), s_sd, sim.size, m_mean, m_sd, m_n,
-                            w.t, w.df, w.p)
-    t = (sim.mean() - cond.mean) / (s_sd / np.sqrt(sim.size))
-    p = 2.0 * sps.t.sf(abs(t), sim.size - 1)
-    return ConditionGap(name, compared, "one-sample", float(sim.mean()), s_sd, sim.size, cond.mean, None, cond.n,
-                        float(t), float(sim.size - 1), float(p))
+    if meas is None and cond.sd is None:
+        t = (sim.mean() - cond.mean) / (s_sd / np.sqrt(sim.size))
+        df = float(sim.size - 1)
+        p = 2.0 * sps.t.sf(abs(t), df)
+        return ConditionGap(name, compared, "one-sample t", float(sim.mean()), s_sd, sim.size, cond.mean, None,
+                            cond.n, float(t), df, float(p), normal_score(float(t), df))
+    m_mean = float(meas.mean()) if meas is not None else cond.mean
+    m_sd = max(float(meas.std(ddof=1)) if meas is not None else float(cond.sd), SD_FLOOR_DEG)
+    m_n = meas.size if meas is not None else cond.n
+    w = welch_t_test_from_stats(float(sim.mean()), s_sd, sim.size, m_mean, m_sd, m_n)
+    g2 = excess_kurtosis(sim, meas) if meas is not None else excess_kurtosis(sim)
+    z_spread = float(np.log(s_sd / m_sd) / log_sd_se(sim.size, m_n, g2))
+    p_spread = float(2.0 * sps.norm.sf(abs(z_spread)))
+    test, p = "welch", float(w.p)
+    if tests and meas is not None:
+        p, p_spread = permutation_p(sim, meas, seed=zlib.crc32(name.encode()))
+        test = "permutation"
+    return ConditionGap(name, compared, test, float(sim.mean()), s_sd, sim.size, m_mean, m_sd, m_n, float(w.t),
+                        float(w.df), p, normal_score(float(w.t), float(w.df)), z_spread, p_spread)
+
+
+def _welch_t(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Welch t of rows of a (B, n1) against rows of b (B, n2)."""
+    va, vb = a.var(axis=1, ddof=1) / a.shape[1], b.var(axis=1, ddof=1) / b.shape[1]
+    return (a.mean(axis=1) - b.mean(axis=1)) / np.sqrt(np.maximum(va + vb, 1e-300))
+
+
+def _log_sd_ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return 0.5 * np.log(np.maximum(a.var(axis=1, ddof=1), 1e-300) / np.maximum(b.var(axis=1, ddof=1), 1e-300))
+
+
+def permutation_p(sim: np.ndarray, meas: np.ndarray, *, seed: int, B: int = PERMUTATIONS) -> tuple[float, float]:
+    """Two-sided Monte Carlo permutation p-values of the Welch t (means) and of ln(s_sim / s_meas) on the
+    mean-centred values (spreads), B random relabellings of the pooled sample."""
+    rng = np.random.default_rng(seed)
+    n1 = sim.size
+    order = np.argsort(rng.random((B, n1 + meas.size)), axis=1)
+
+    def p_of(x: np.ndarray, y: np.ndarray, stat) -> float:
+        observed = float(stat(x[None], y[None])[0])
+        pooled = np.concatenate([x, y])[order]
+        null = stat(pooled[:, :n1], pooled[:, n1:])
+        return float((1 + np.sum(np.abs(null) >= abs(observed) - 1e-12)) / (B + 1))
+
+    return p_of(sim, meas, _welch_t), p_of(sim - sim.mean(), meas - meas.mean(), _log_sd_ratio)
+
+
+def permutation_gof(simulated: Mapping[str, np.ndarray], measured: Measured, reference: Callable[[str], str | None],
+                    D: float, *, B: int = GOF_PERMUTATIONS, seed: int = 0) -> float | None:
+    """P(D* >= D) under relabelling of whole units between simulated eyes and measured subjects (module
+    docstring); None unless every measured condition has per-subject values."""
+    from eyehil.analysis.discrepancy.data import MeasuredCondition
+
+    if any(c.values is None for c in measured.conditions.values()):
+        return None
+    keys = list(dict.fromkeys([*measured.conditions, *(r for c in measured.conditions if (r := reference(c))
+                                                        and r in measured.conditions)]))
+    sim = np.column_stack([np.asarray(simulated[k], float) for k in keys])
+    sim = sim[np.all(np.isfinite(sim), axis=1)]
+    meas = np.column_stack([measured.conditions[k].values for k in keys])
+    pooled, n = np.vstack([sim, meas]), len(sim)
+    if n < 2 or len(meas) < 2:
+        return None
+    rng = np.random.default_rng(seed)
+    exceed = 0
+    for _ in range(B):
+        order = rng.permutation(len(pooled))
+        s_part, m_part = pooled[order[:n]], pooled[order[n:]]
+        fake = Measured(measured.experiment, {k: MeasuredCondition.of(m_part[:, i]) for i, k in enumerate(keys)
+                                              if k in measured.conditions}, measured.subjects)
+        d = compare({k: s_part[:, i] for i, k in enumerate(keys)}, fake, reference, tests=False).D
+        exceed += d >= D - 1e-12
+    return float((1 + exceed) / (B + 1))

@@ -1,40 +1,85 @@
-"""The discrepancy workflow: find where simulation and measured data disagree, name the missing effect,
-add it to the model, and show the gap shrink.
+"""The discrepancy workflow: find where simulation and measured data disagree, name the missing effect(s),
+add them to the model, and show the gap shrink, or say that no known effect explains it.
 
-1. find (`find`): simulate the experiment of the measured data on a set of search eyes with the current
-   model, and test every measured condition (`eyehil.analysis.discrepancy.stats`: Welch or one-sample t,
-   Holm-adjusted, gap measure D = sum t^2). No significant condition: stop, nothing is added.
-2. name (`name_effects`): for every effect of the registry (`eyehil.emulator.effects`) that can act in this
-   experiment and is not in the model yet, fit its parameters to minimise D (`eyehil.analysis.discrepancy.search`),
-   and rank the effects by D + 2k (k fitted parameters).
-3. add: the best-ranked effect joins the model at its fitted values if it lowers D by more than the
-   chi-square(k) 95 % point (after the misfit scale factor, `EffectFit.passes`); otherwise the gap is
-   reported as unexplained by the registry.
-   Steps 1-3 repeat for up to `rounds` rounds.
-4. show (`run_discrepancy`): the comparison before and after, on the (usually larger) show eyes, which
-   checks that what was fitted on the search eyes carries over.
+1. find (`find`): simulate the experiment of the measured data on the search eyes with the current model
+   and test every measured condition's mean and spread (`eyehil.analysis.discrepancy.stats`: permutation tests,
+   Holm adjusted; gap measure D = sum of squared normal scores of the mean and spread terms). No
+   significant gap: stop.
+2. name (`name_effects`): every effect of the catalogue (`eyehil.emulator.effects`) that can act in this
+   experiment and is not in the model yet is fitted to minimise D (`eyehil.analysis.discrepancy.search`: a
+   screen of all, refinement of the best few) and ranked by D + 2k (k fitted parameters). Rounds after
+   the first consider only the effects that lowered D significantly in round 1 (at most
+   `LATER_CANDIDATES`): an effect that explains nothing alone is not tried as a second effect.
+3. add: the top-ranked effect joins the model at its fitted values if it lowers D by more than the
+   chi-square(k) 95 % point (after the misfit scale factor) and no fitted parameter is at the edge of its
+   plausible range (`EffectFit.passes`). Otherwise nothing is added and the round says why.
+   Steps 1-3 repeat for up to `rounds` rounds (a second effect is fitted with the first in the model).
+4. show (`run_discrepancy`): the comparison before and after, on the (usually larger) show eyes.
 
-`hidden_measured` makes "measured" data by simulating other eyes with a hidden effect, for testing the
-workflow blind (tests/test_discrepancy.py, `eyehil discrepancy --hidden`).
+The **outcome** (`DiscrepancyResult.outcome`) is decided by a stated criterion:
+
+- "no gap": round 1 found no significant gap; nothing is added.
+- "explained": effects were added, and with them (a) no significant gap is left on the search eyes nor
+  on the show eyes, and (b) the model fits: goodness-of-fit p >= `ALPHA_GOF` on the search eyes (the
+  permutation test of D of `eyehil.analysis.discrepancy.stats.permutation_gof` where every condition has
+  per-subject values, else P(chi-square(n_terms - k_total) >= D)). `named_effects` lists them in the order of the size
+  of what each explains alone (its own drop of D from the model without effects).
+- "none explains": otherwise. Effects fitted on the way that lowered D are reported as partial, not
+  named: a significant gap left after an addition means the addition did not explain the data.
+
+With two or more effects added, `interactions` reports D with each alone, all together, and the
+interaction D0 - D_all - sum_i (D0 - D_i) (0 when their contributions add; computed on the search eyes).
+
+`hidden_measured` makes "measured" data by simulating other eyes with hidden effects, for testing the
+workflow blind (tests/test_discrepancy*.py, `eyehil discrepancy --hidden`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import nullcontext
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from eyehil.analysis.discrepancy.data import Measured, MeasuredCondition
 from eyehil.analysis.discrepancy.metrics import Evaluator
-from eyehil.analysis.discrepancy.search import EffectFit, search_effects
-from eyehil.analysis.discrepancy.stats import Comparison, compare
+from eyehil.analysis.discrepancy.search import TOP, EffectFit, max_evaluations, search_effects
+from eyehil.analysis.discrepancy.stats import Comparison, compare, permutation_gof
 from eyehil.emulator import effects as registry
 from eyehil.emulator.effects import Applied, Effect
 from eyehil.emulator.eye.model import EyeModel
+
+ALPHA_GOF = 0.01
+LATER_CANDIDATES = 8
+CHUNK = 12  # points per evaluation call (each a batched calibration)
+
+
+def _evaluations(chosen: Sequence[Effect]) -> int:
+    """Evaluations of a round at most: every effect's screen, the `TOP` largest refinements."""
+    refine = sorted((max_evaluations(e) - max_evaluations(e, refined=False) for e in chosen), reverse=True)
+    return sum(max_evaluations(e, refined=False) for e in chosen) + sum(refine[:TOP])
+OUTCOMES = ("no gap", "explained", "none explains")
+
+
+class Progress(Protocol):
+    """Where the workflow reports what it does: a stage with its number of steps, then steps done."""
+
+    def stage(self, label: str, total: int) -> None: ...
+
+    def advance(self, n: int) -> None: ...
+
+
+class Silent:
+    """A `Progress` that reports nothing."""
+
+    def stage(self, label: str, total: int) -> None:
+        pass
+
+    def advance(self, n: int) -> None:
+        pass
 
 
 @dataclass(frozen=True, eq=False)
@@ -47,30 +92,78 @@ class Round:
     verdict: str
 
 
+@dataclass(frozen=True)
+class Interaction:
+    """D on the search eyes with the added effects alone and together (module docstring)."""
+
+    D0: float
+    alone: dict[str, float]
+    together: float
+    comparisons: dict[str, Comparison] = field(default_factory=dict)  # each alone, and "together"
+
+    @property
+    def interaction(self) -> float:
+        return float(self.D0 - self.together - sum(self.D0 - d for d in self.alone.values()))
+
+
 @dataclass(eq=False)
 class DiscrepancyResult:
-    """The rounds, the effects added, and the show comparison before and after."""
+    """The rounds, the effects added, the final comparisons and the outcome (module docstring)."""
 
     measured: Measured
     rounds: list[Round]
     added: list[Applied]
-    before: Comparison
-    after: Comparison
+    before: Comparison  # show eyes, the model without the added effects
+    after: Comparison  # show eyes, with them
+    final: Comparison  # search eyes, with them
+    outcome: str
+    reason: str
+    named: list[Applied] = field(default_factory=list)  # in order of size ("explained" only)
+    fits: list[EffectFit] = field(default_factory=list)  # the added effects' fits, in the order added
+    interactions: Interaction | None = None
     settings: dict[str, Any] = field(default_factory=dict)
+    gof_p: float | None = None  # goodness of fit of the final model (search eyes), None if nothing added
 
     @property
     def shrink(self) -> float:
         """1 - D_after / D_before on the show eyes (0 when nothing was added)."""
         return 1.0 - self.after.D / self.before.D if self.before.D > 0 else 0.0
 
+    @property
+    def k_total(self) -> int:
+        return sum(len(a.effect.fitted) for a in self.added)
+
+    def summary(self) -> dict[str, Any]:
+        """What summary.json holds: the named effects in order, their parameters (value, 1 sigma, 95 %
+        half-width, edge flags), D before and after on the show eyes, the outcome and its reason."""
+        by_name = {f.effect.name: f for f in self.fits}
+        parameters = {}
+        for a in self.added:
+            f = by_name[a.effect.name]
+            parameters[a.effect.name] = {p.name: {"value": f.values[p.name], "sigma": f.sigma.get(p.name),
+                                                  "ci95": f.ci95.get(p.name), "unit": p.unit,
+                                                  "at_edge": p.name in f.at_edge} for p in a.effect.fitted}
+        return {"outcome": self.outcome, "reason": self.reason,
+                "named_effects": [a.effect.name for a in self.named],
+                "partial_effects": [] if self.outcome == "explained" else [a.effect.name for a in self.added],
+                "parameters": parameters,
+                "gap_before": {"D": self.before.D, "significant": [g.condition for g in self.before.significant]},
+                "gap_after": {"D": self.after.D, "significant": [g.condition for g in self.after.significant]},
+                "gap_search_final": {"D": self.final.D, "gof_p": self.gof_p,
+                                     "significant": [g.condition for g in self.final.significant]},
+                "shrink": self.shrink,
+                "interaction": None if self.interactions is None else {
+                    "D0": self.interactions.D0, "alone": self.interactions.alone,
+                    "together": self.interactions.together, "interaction": self.interactions.interaction}}
+
 
 def find(evaluator: Evaluator, measured: Measured, alpha: float = 0.05) -> Comparison:
-    """Step 1: the current model's gaps."""
+    """Step 1: the current model's gaps (with the permutation tests)."""
     return compare(evaluator.base_metrics, measured, evaluator.experiment.reference, alpha)
 
 
 def candidates(evaluator: Evaluator, names: Sequence[str] | None = None) -> list[Effect]:
-    """Registered effects that can act in this experiment and are not in the model yet."""
+    """Catalogue effects that can act in this experiment and are not in the model yet."""
     present = {a.effect.name for a in evaluator.base}
     chosen = [registry.get(n) for n in (names or registry.names())]
     one_session = len(evaluator.host.head_positions) < 2
@@ -78,52 +171,118 @@ def candidates(evaluator: Evaluator, names: Sequence[str] | None = None) -> list
 
 
 def name_effects(evaluator: Evaluator, measured: Measured, before: Comparison, effect_names=None,
-                 alpha: float = 0.05, progress: Callable[[int], None] | None = None) -> list[EffectFit]:
+                 alpha: float = 0.05, progress: Progress | None = None) -> list[EffectFit]:
     """Step 2: every candidate effect fitted (batched together), ranked by D + 2k (best first)."""
+    progress = progress or Silent()
 
-    def gap(batch: list[Applied]) -> np.ndarray:
-        metrics = evaluator.evaluate([[a] for a in batch], progress)
-        return np.array([compare(m, measured, evaluator.experiment.reference, alpha).D for m in metrics])
+    def score(metrics) -> float:
+        return compare(metrics, measured, evaluator.experiment.reference, alpha, tests=False).D
 
-    fits = search_effects(candidates(evaluator, effect_names), gap, before.D, len(before.gaps))
-    return sorted(fits, key=lambda f: f.score)
+    def evaluate(batch: list[Applied]) -> list:
+        out = []
+        for i in range(0, len(batch), CHUNK):  # chunks, so that progress is heard every few seconds
+            out += evaluator.evaluate([[a] for a in batch[i:i + CHUNK]])
+            progress.advance(len(batch[i:i + CHUNK]))
+        return out
+
+    fits = search_effects(candidates(evaluator, effect_names), evaluate, score, before.D, before.n_terms)
+    return sorted(fits, key=lambda f: (f.screened, f.score))
 
 
 def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel | None = None,
                     effect_names: Sequence[str] | None = None, rounds: int = 2, alpha: float = 0.05,
-                    seed: int = 0, workers: int = 1,
-                    progress: Callable[[int], None] | None = None) -> DiscrepancyResult:
+                    seed: int = 0, workers: int = 1, progress: Progress | None = None) -> DiscrepancyResult:
     """The whole workflow (module docstring); `search_eyes` defaults to `eyes`; `workers` > 1 evaluates the
-    points of each search stage in that many processes."""
+    points of each search stage in that many processes; `progress` hears of every stage."""
+    progress = progress or Silent()
     with ProcessPoolExecutor(workers) if workers > 1 else nullcontext() as pool:
+        progress.stage("simulating and calibrating the search eyes", 1)
         search = initial = Evaluator(measured.experiment, search_eyes if search_eyes is not None else eyes,
                                      seed=seed, pool=pool, workers=workers)
-        done, added = [], []
-        for _ in range(rounds):
-            current = _round(search, measured, effect_names, alpha, progress)
+        progress.advance(1)
+        done, added, fits = [], [], []
+        names = list(effect_names or registry.names())
+        for i in range(rounds):
+            if i == 1:  # later rounds: the effects that lowered D in round 1
+                names = [f.effect.name for f in done[0].fits if f.lowers()][:LATER_CANDIDATES]
+            current = _round(search, measured, names, alpha, progress, f"round {i + 1}")
             done.append(current)
             if current.added is None:
                 break
             added.append(current.added.applied)
+            fits.append(current.added)
+            progress.stage(f"round {i + 1}: the model with {current.added.effect.name}", 1)
             search = search.with_base(added)
+            progress.advance(1)
+        final = done[-1].before if done[-1].added is None else find(search, measured, alpha)
+        interactions = None
+        if len(added) > 1:
+            progress.stage("interactions of the added effects", 1)
+            points = [[a] for a in added] + [list(added)]
+            comps = [compare(m, measured, initial.experiment.reference, alpha, tests=False)
+                     for m in initial.evaluate(points)]
+            labels = [a.effect.name for a in added] + ["together"]
+            alone = {a.effect.name: c.D for a, c in zip(added, comps, strict=False)}
+            interactions = Interaction(done[0].before.D, alone, comps[-1].D, dict(zip(labels, comps, strict=True)))
+            progress.advance(1)
+        progress.stage(f"show: {len(eyes)} eyes without and with the added effects", 2)
         if search_eyes is None:
             show_before, show_after = initial, search
         else:
             show_before = Evaluator(measured.experiment, eyes, seed=seed, pool=pool, workers=workers)
+            progress.advance(1)
             show_after = show_before.with_base(added) if added else show_before
+        progress.advance(1)
+    before, after = find(show_before, measured, alpha), find(show_after, measured, alpha)
+    k_total = sum(len(a.effect.fitted) for a in added)
+    gof = permutation_gof(search.base_metrics, measured, search.experiment.reference, final.D) if added else None
+    gof = final.gof_p(k_total) if gof is None else gof
+    outcome, reason = decide(done, final, after, k_total, gof)
+    named = []
+    if outcome == "explained":
+        size = {a.effect.name: (interactions.alone[a.effect.name] if interactions else final.D) for a in added}
+        named = sorted(added, key=lambda a: size[a.effect.name])  # lowest D alone = explains most
     settings = {"experiment": measured.experiment, "eyes": len(show_before.eyes), "search_eyes": len(initial.eyes),
-                "rounds": rounds, "alpha": alpha, "seed": seed,
+                "rounds": rounds, "alpha": alpha, "alpha_gof": ALPHA_GOF, "seed": seed,
                 "evaluations": sum(len(f.points) for r in done for f in r.fits)}
-    return DiscrepancyResult(measured, done, added, find(show_before, measured, alpha),
-                             find(show_after, measured, alpha), settings)
+    return DiscrepancyResult(measured, done, added, before, after, final, outcome, reason, named, fits,
+                             interactions, settings, gof if added else None)
 
 
-def _round(search: Evaluator, measured: Measured, effect_names, alpha, progress) -> Round:
+def decide(rounds: list[Round], final: Comparison, show_after: Comparison, k_total: int,
+           gof: float | None = None) -> tuple[str, str]:
+    """The outcome and its reason (module docstring); `gof` the goodness-of-fit p of the final model
+    (default the chi-square reading of D)."""
+    first = rounds[0]
+    if not first.before.significant and first.added is None:
+        return "no gap", "no significant gap between the model and the data: nothing added"
+    if not any(r.added for r in rounds):
+        return "none explains", f"none of the known effects explains the gap: {first.verdict}"
+    problems = []
+    if final.significant:
+        problems.append("significant gaps left on the search eyes: " + ", ".join(g.compared for g in final.significant))
+    if show_after.significant:
+        problems.append("significant gaps left on the show eyes: "
+                        + ", ".join(f"{g.compared} ({g.kinds(show_after.alpha)})" for g in show_after.significant))
+    gof = final.gof_p(k_total) if gof is None else gof
+    if gof < ALPHA_GOF:
+        problems.append(f"the final model does not fit: D = {final.D:.1f} over {final.n_terms} terms, "
+                        f"{k_total} fitted, goodness-of-fit p = {gof:.2g} < {ALPHA_GOF}")
+    if problems:
+        return "none explains", "none of the known effects explains the gap: " + "; ".join(problems)
+    return "explained", (f"no significant gap left (search and show eyes) and the model fits: D = {final.D:.1f} "
+                         f"over {final.n_terms} terms, goodness-of-fit p = {gof:.2g}")
+
+
+def _round(search: Evaluator, measured: Measured, effect_names, alpha, progress, label: str) -> Round:
     """Steps 1-3 once."""
     before = find(search, measured, alpha)
     if not before.significant:
         return Round(before, [], None, "no significant gap: nothing to add")
-    fits = name_effects(search, measured, before, effect_names, alpha, progress)
+    chosen = candidates(search, effect_names)
+    progress.stage(f"{label}: fitting {len(chosen)} effects", _evaluations(chosen))
+    fits = name_effects(search, measured, before, effect_names, alpha, progress) \
+        if effect_names is None or len(effect_names) else []
     best = fits[0] if fits and fits[0].passes() else None
     return Round(before, fits, best, _verdict(best, fits))
 
@@ -134,7 +293,10 @@ def _verdict(best: EffectFit | None, fits: list[EffectFit]) -> str:
     if not fits:
         return "no candidate effect left"
     top = fits[0]
-    return (f"no effect explains the gap: the best, {top.applied.label()}, lowers D by {top.reduction:.2f}, "
+    if top.at_edge and top.lowers():
+        return (f"the best, {top.applied.label()}, ends at the edge of its plausible range ({', '.join(top.at_edge)}): "
+                "not added")
+    return (f"the best, {top.applied.label()}, lowers D by {top.reduction:.2f}, "
             f"{top.reduction / top.scale**2:.2f} after the misfit scale (needs > the chi-square({top.k}) 95 % point)")
 
 

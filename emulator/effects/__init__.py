@@ -1,52 +1,88 @@
-"""Optional model extensions, each named and parameterised: the vocabulary of the discrepancy workflow.
+"""Optional model extensions, each a documented class: the catalogue of the discrepancy workflow.
 
-The table maps a name to "module:Class"; a module is imported only when its effect is asked for
-(python-can's interface table). Every effect documents its physics, units, frame and a reference, and
-is the identity at its parameters' neutral values (`eyehil.emulator.effects.base`).
+Modules (each effect is a subclass of `base.Effect` and registers itself by being defined):
 
-| name            | stage    | fitted parameters            | acts on                                        |
-|-----------------|----------|------------------------------|------------------------------------------------|
-| feature_noise   | features | sigma_px (px)                | pupil and glint centres, every fixation        |
-| pupil_decentre  | model    | nasal_mm, superior_mm (mm)   | the pupil centre, every fixation               |
-| pupil_change    | model    | delta_diameter_mm (mm)       | pupil size and centre at the validation heads  |
-| lens_distortion | model    | k1 (normalised)              | the simulated camera; the host stays pinhole   |
-| head_roll       | model    | roll_deg (deg)               | head (eye) roll at the validation heads        |
+- `base`: the `Effect` interface, `Parameter`, `Applied`, the registry `REGISTRY`.
+- `run`: the forward model with effects (`simulate_with`), sessions, sensitivities.
+- `noise`: feature_noise. `pupil`: pupil_decentre, pupil_change, pupil_shift. `cornea`:
+  corneal_asphericity, corneal_index. `subject`: fixation_error, head_jitter. `scene`: lens_distortion,
+  head_roll. `camera`: tangential_distortion, camera_pose, camera_bump. `geometry`: led_position,
+  screen_position, screen_tilt. `occlusion`: glint_occlusion.
+- `anatomy`: corneal_astigmatism, cornea_tilt, cornea_decentre, pupil_ellipse (the anatomy of
+  `eyehil.emulator.eye.anatomy`).
+
+| name                  | stage    | fitted parameters                  | acts on                                      |
+|-----------------------|----------|------------------------------------|----------------------------------------------|
+| feature_noise         | features | sigma_px (px)                      | pupil and glint centres, every fixation      |
+| pupil_decentre        | model    | nasal_mm, superior_mm (mm)         | the pupil centre, every fixation             |
+| pupil_change          | model    | delta_diameter_mm (mm)             | pupil size and centre at the validation heads|
+| pupil_shift           | model    | nasal_mm, superior_mm (mm)         | the pupil centre at the validation heads     |
+| corneal_asphericity   | model    | delta_q                            | the anterior corneal conic constant          |
+| corneal_index         | model    | delta_n                            | corneal and aqueous refractive indices       |
+| fixation_error        | features | sigma_deg (deg)                    | where each fixation lands (linearised)       |
+| head_jitter           | features | sigma_mm (mm)                      | head position of each fixation (linearised)  |
+| lens_distortion       | model    | k1                                 | the simulated camera; the host stays pinhole |
+| head_roll             | model    | roll_deg (deg)                     | head (eye) roll at the validation heads      |
+| tangential_distortion | features | p1, p2                             | image points (Brown decentring distortion)   |
+| camera_pose           | model    | pitch_deg, yaw_deg (deg)           | camera orientation, both sessions            |
+| camera_bump           | model    | pitch_deg, yaw_deg (deg)           | camera orientation at the validation heads   |
+| led_position          | model    | dx_mm, dy_mm (mm)                  | the LEDs' true positions                     |
+| screen_position       | model    | dx_mm, dy_mm (mm)                  | the screen's (targets') true position        |
+| screen_tilt           | model    | tilt_deg, yaw_deg (deg)            | the screen's orientation                     |
+| glint_occlusion       | features | bias                               | the pupil centre where a glint hides its edge|
 
     from eyehil.emulator.effects import Applied, get, simulate_with
     noise = get("feature_noise")
     features = simulate_with(eyes, scene, [Applied.of(noise, sigma_px=0.1)], rng=np.random.default_rng(1))
 
-Modules: `base` (the `Effect` interface), `run` (the forward model with effects), and the effects by what
-they act on: `noise` (features), `pupil` (the pupil), `scene` (camera and head).
+Adding an effect: write one class (see `base`) in a module and import it (or `load_module("pkg.mod")`,
+or name the module in the environment variable EYEHIL_EFFECT_MODULES, comma-separated).
 """
 
 from __future__ import annotations
 
 import importlib
+import importlib.util
+import os
 
-from eyehil.emulator.effects.base import SESSIONS, Applied, Effect, Parameter
+from eyehil.emulator.effects.base import REGISTRY, SESSIONS, Applied, Effect, Parameter
 from eyehil.emulator.effects.run import sessions, simulate_with
 
-EFFECTS: dict[str, str] = {
-    "feature_noise": "eyehil.emulator.effects.noise:FeatureNoise",
-    "pupil_decentre": "eyehil.emulator.effects.pupil:PupilDecentre",
-    "pupil_change": "eyehil.emulator.effects.pupil:PupilChange",
-    "lens_distortion": "eyehil.emulator.effects.scene:LensDistortion",
-    "head_roll": "eyehil.emulator.effects.scene:HeadRoll",
-}
+MODULES: list[str] = [f"eyehil.emulator.effects.{m}" for m in
+                      ("noise", "pupil", "cornea", "subject", "scene", "camera", "geometry", "occlusion", "anatomy")]
+_loaded: set[str] = set()
+
+
+def load_module(module: str) -> None:
+    """Import a module of effect classes (they register themselves); a missing optional module of `MODULES`
+    is skipped, any other import error is raised."""
+    if module in _loaded:
+        return
+    if module in MODULES and importlib.util.find_spec(module) is None:
+        _loaded.add(module)
+        return
+    importlib.import_module(module)
+    _loaded.add(module)
+
+
+def _load_all() -> None:
+    extra = [m.strip() for m in os.environ.get("EYEHIL_EFFECT_MODULES", "").split(",") if m.strip()]
+    for module in [*MODULES, *extra]:
+        load_module(module)
 
 
 def names() -> list[str]:
-    """The registered effect names, in table order."""
-    return list(EFFECTS)
+    """The registered effect names, in registration order."""
+    _load_all()
+    return list(REGISTRY)
 
 
 def get(name: str) -> Effect:
     """The effect registered as `name`; ValueError naming the known ones otherwise."""
-    if name not in EFFECTS:
-        raise ValueError(f"unknown effect {name!r}; known: {', '.join(EFFECTS)}")
-    module, cls = EFFECTS[name].split(":")
-    return getattr(importlib.import_module(module), cls)()
+    _load_all()
+    if name not in REGISTRY:
+        raise ValueError(f"unknown effect {name!r}; known: {', '.join(REGISTRY)}")
+    return REGISTRY[name]()
 
 
 def parse(spec: str) -> Applied:
@@ -69,5 +105,5 @@ def parse(spec: str) -> Applied:
         raise ValueError(f"effect spec {spec!r}: {exc} (use NAME=VALUE[,VALUE] or NAME:PARAM=VALUE,...)") from None
 
 
-__all__ = ["EFFECTS", "SESSIONS", "Applied", "Effect", "Parameter", "get", "names", "parse", "sessions",
-           "simulate_with"]
+__all__ = ["MODULES", "REGISTRY", "SESSIONS", "Applied", "Effect", "Parameter", "get", "load_module", "names",
+           "parse", "sessions", "simulate_with"]

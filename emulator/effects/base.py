@@ -1,5 +1,11 @@
 """The interface of a model extension ("effect"): named parameters, and two hooks into the forward model.
 
+A user adds an effect by writing one subclass of `Effect` with a `name`: defining the class registers it
+(`Effect.__init_subclass__` -> `REGISTRY`), so it is in the catalogue as soon as its module is imported
+(`eyehil.emulator.effects.MODULES` lists the catalogue's modules, `eyehil.emulator.effects.load_module` adds one).
+Every effect documents its physics, parameters with units and plausible range, a `prior` (typical value
+and spread in the population, for orientation and for drawing test strengths) and a `reference`.
+
 An effect acts at one or both of two stages of `simulate_with` (`eyehil.emulator.effects.run`):
 
 - `apply(eyes, scene, values, session) -> (eyes, scene)`: before ray tracing, on the anatomy (an
@@ -8,6 +14,11 @@ An effect acts at one or both of two stages of `simulate_with` (`eyehil.emulator
   fixations a host calibrates on and the ones it is judged on.
 - `perturb(features, values, rng) -> features`: after ray tracing, on the image features (px), with an
   explicit `numpy.random.Generator`.
+
+A `perturb` that needs how the features respond to a small geometric change (a fixation or head
+displacement per fixation) sets `needs_sensitivity` and computes it once in `sensitivity(eyes, scene,
+session, heads)` (by ray tracing displaced copies); the runner caches it per effect and passes it to
+`perturb(..., sensitivity=...)`: such an effect costs no ray tracing per parameter value.
 
 The host never learns about an effect: a scene changed by `apply` is the truth of the simulation, while the
 host keeps the nominal scene (e.g. a lens distortion it does not correct). Every effect is the identity at
@@ -28,6 +39,7 @@ from eyehil.emulator.features import Features
 from eyehil.emulator.scene import Scene
 
 SESSIONS = ("calibration", "validation")
+REGISTRY: dict[str, type[Effect]] = {}
 
 
 @dataclass(frozen=True)
@@ -56,8 +68,16 @@ class Effect:
     name: ClassVar[str] = ""
     parameters: ClassVar[tuple[Parameter, ...]] = ()
     reference: ClassVar[str] = ""
+    prior: ClassVar[str] = ""  # typical value +- spread in the population, in words with units
     stage: ClassVar[str] = "model"
     validation_only: ClassVar[bool] = False
+    needs_sensitivity: ClassVar[bool] = False
+
+    def __init_subclass__(cls, **kwargs: object) -> None:
+        """A subclass with a `name` joins the registry (a later class of the same name replaces it)."""
+        super().__init_subclass__(**kwargs)
+        if cls.name:
+            REGISTRY[cls.name] = cls
 
     @property
     def fitted(self) -> tuple[Parameter, ...]:
@@ -96,9 +116,15 @@ class Effect:
         return eyes, scene
 
     def perturb(self, features: Features, values: Mapping[str, float],
-                rng: np.random.Generator | None) -> Features:
-        """The features as the host receives them (default: unchanged)."""
+                rng: np.random.Generator | None, **kwargs: object) -> Features:
+        """The features as the host receives them (default: unchanged); `sensitivity=` for effects that
+        set `needs_sensitivity`."""
         return features
+
+    def sensitivity(self, eyes: EyeModel, scene: Scene, session: str, heads: tuple) -> dict[str, np.ndarray]:
+        """Derivatives of the features of one session with respect to this effect's displacement
+        (effects with `needs_sensitivity`; arrays shaped like the features with a trailing axis)."""
+        raise NotImplementedError(f"effect {self.name!r} has no sensitivity")
 
     def summary(self) -> str:
         """The first line of the docstring."""

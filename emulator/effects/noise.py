@@ -34,13 +34,14 @@ class FeatureNoise(Effect):
     name = "feature_noise"
     stage = "features"
     reference = "Holmqvist, Nystrom & Mulvey 2012, ETRA'12 45-52"
+    prior = "0.02-0.2 px per fixation average for a good remote tracker (0.1-0.5 px per frame)"
     parameters = (
         Parameter("sigma_px", "px", 0.0, 0.0, 0.4, neutral=0.0,
                   doc="SD of the noise of each centre coordinate, per fixation"),
     )
 
     def perturb(self, features: Features, values: Mapping[str, float],
-                rng: np.random.Generator | None) -> Features:
+                rng: np.random.Generator | None, **kwargs: object) -> Features:
         sigma = float(values["sigma_px"])
         if sigma < 0:
             raise ValueError(f"feature_noise: sigma_px must be >= 0, got {sigma}")

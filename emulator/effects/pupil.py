@@ -37,6 +37,7 @@ class PupilDecentre(Effect):
 
     name = "pupil_decentre"
     reference = "Wildenmann & Schaeffel 2013, Ophthalmic Physiol Opt 33:634-641"
+    prior = "0.18 +- 0.19 mm nasal, 0.30 +- 0.30 mm superior (at 4 mm pupil; 10 right eyes)"
     parameters = (
         Parameter("nasal_mm", "mm", 0.0, -0.4, 0.8, doc="pupil centre toward the nose (right eye +x)"),
         Parameter("superior_mm", "mm", 0.0, -0.4, 0.8, doc="pupil centre upward"),
@@ -55,6 +56,7 @@ class PupilChange(Effect):
     reference = ("Wildenmann & Schaeffel 2013, Ophthalmic Physiol Opt 33:634-641; Jaschinski 2016, "
                  "J Eye Mov Res 9(4); Choe, Blake & Lee 2016, Vision Res 118:48-59")
     validation_only = True
+    prior = "0 +- 1 mm between sessions under constant light; 2-4 mm with a luminance change"
     parameters = (
         Parameter("delta_diameter_mm", "mm", 0.0, -2.0, 2.0,
                   doc="validation minus calibration pupil diameter (negative: constriction)"),
@@ -73,3 +75,29 @@ class PupilChange(Effect):
         radius = np.clip(eyes.pupil_radius + delta / 2, MIN_PUPIL_RADIUS_MM, eyes.limbus_radius - LIMBUS_MARGIN_MM)
         shift = -delta * np.array([values["nasal_per_mm"], values["superior_per_mm"]])
         return eyes.replace(pupil_radius=radius, pupil_decentre=eyes.pupil_decentre + shift), scene
+
+
+class PupilShift(Effect):
+    """The pupil centre moved between calibration and validation (mm nasal, mm superior), size unchanged.
+
+    What a pupil-size change does to a centre-based estimator, without fixing the shift per mm of
+    diameter: the observed quantity is the product (shift rate x diameter change), and individuals'
+    rates range from -0.1 to +0.2 mm/mm (module docstring), so a 1-2 mm size change moves the centre by
+    up to about 0.2-0.3 mm. Frame as `PupilDecentre`; applied at the validation head positions only.
+    """
+
+    name = "pupil_shift"
+    reference = "Wildenmann & Schaeffel 2013, Ophthalmic Physiol Opt 33:634-641; Jaschinski 2016, J Eye Mov Res 9(4)"
+    prior = "0 +- 0.1 mm (rate 0.05 mm/mm x size change 0-2 mm)"
+    validation_only = True
+    parameters = (
+        Parameter("nasal_mm", "mm", 0.0, -0.3, 0.3, doc="validation minus calibration, toward the nose"),
+        Parameter("superior_mm", "mm", 0.0, -0.3, 0.3, doc="validation minus calibration, upward"),
+    )
+
+    def apply(self, eyes: EyeModel, scene: Scene, values: Mapping[str, float],
+              session: str) -> tuple[EyeModel, Scene]:
+        if session != "validation":
+            return eyes, scene
+        shift = np.array([values["nasal_mm"], values["superior_mm"]])
+        return eyes.replace(pupil_decentre=eyes.pupil_decentre + shift), scene

@@ -49,6 +49,7 @@ class LensDistortion(Effect):
 
     name = "lens_distortion"
     reference = "Brown 1966, Photogramm. Eng. 32(3):444-462"
+    prior = "|k1| 0.1-1 for narrow-field machine-vision lenses (normalised coordinates)"
     parameters = (
         Parameter("k1", "", 0.0, -3.0, 3.0, doc="radial coefficient: x' = x (1 + k1 r^2 + k2 r^4)"),
     )
@@ -65,6 +66,7 @@ class HeadRoll(Effect):
     name = "head_roll"
     reference = "Guestrin & Eizenman 2006, IEEE TBME 53(6); Collewijn et al. 1985, Exp Brain Res 59:185-196"
     validation_only = True
+    prior = "0 +- 3 deg net torsion change for a free head"
     parameters = (
         Parameter("roll_deg", "deg", 0.0, -8.0, 8.0, doc="roll about the scene z axis, + per HeadPose.roll"),
     )

@@ -1,0 +1,181 @@
+"""Measured data as recordings: eyehil recordings (docs/recording.md) of real or simulated subjects turned
+into per-subject conditions at the feature level and at the gaze-error level.
+
+Convention (the recording format lets writers add keys; readers ignore unknown ones): one recording per
+subject; the header's `"scene"` names the scene preset (default: the experiment's); target record
+`target_id` = h * T + t for head position h and target t of that scene (so the head position of every
+sample is known from its target label); `label` is free text ("<head name>/<t>"). Samples whose pupil
+flag has DETECTED and every glint VALID count; a fixation's features are the mean over its samples (the
+emulator's features are fixation means too). Only the one-eye Guestrin 2006 experiment is supported
+(recordings of the right eye).
+
+Feature conditions (`feature_conditions`, per eye and head position <h>, px; every head position other
+than the first is compared within subjects to the first, like the gaze conditions):
+
+- `pgv_x:<h>`, `pgv_y:<h>`: the pupil-glint vector (pupil centre minus the glints' mean), mean over targets;
+- `gain_x:<h>`, `gain_y:<h>`: its least-squares slope against the target's screen x / y (px per 100 mm):
+  how far the pupil moves relative to the glints per unit of gaze, which the corneal shape, the pupil's
+  position and the camera set;
+- `glint_spacing:<h>`: the distance between the first and last glint (px), mean over targets;
+- `pupil_major:<h>` (px) and `pupil_ratio:<h>` (minor / major axis), means over targets.
+
+The gaze conditions (H1, head:*, bias_*) come from running the host's own calibration on the recorded
+features (`eyehil.analysis.discrepancy.metrics`), exactly as for the simulated eyes.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from eyehil.analysis.discrepancy.data import Measured, MeasuredCondition
+from eyehil.drivers.recording import FORMAT, VERSION, read_recording
+from eyehil.emulator.features import Features, empty_features
+from eyehil.emulator.scene import Scene, load_scene
+
+QUANTITIES = ("pgv_x", "pgv_y", "gain_x", "gain_y", "glint_spacing", "pupil_major", "pupil_ratio")
+DETECTED, GLINT_VALID = 0x01, 0x01
+
+
+def feature_conditions(features: Features, side: str = "right") -> dict[str, np.ndarray]:
+    """Per-eye feature conditions (module docstring), each (E,)."""
+    s = features.sides.index(side)
+    valid = features.valid[:, s]
+    pupil = np.where(valid[..., None], features.pupil_centre_px[:, s], np.nan)
+    glints = np.where(valid[..., None, None], features.glint_px[:, s], np.nan)
+    axes = np.where(valid[..., None], features.pupil_axes_px[:, s], np.nan)
+    pgv = pupil - glints.mean(axis=-2)
+    spacing = np.linalg.norm(glints[..., 0, :] - glints[..., -1, :], axis=-1)
+    tx, ty = (features.targets[:, i] - features.targets[:, i].mean() for i in (0, 1))
+    out = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        for h, head in enumerate(features.head_positions):
+            name = getattr(head, "name", str(h))
+            out[f"pgv_x:{name}"] = np.nanmean(pgv[:, h, :, 0], axis=-1)
+            out[f"pgv_y:{name}"] = np.nanmean(pgv[:, h, :, 1], axis=-1)
+            for key, t, c in (("gain_x", tx, 0), ("gain_y", ty, 1)):
+                v = pgv[:, h, :, c]
+                ok = np.isfinite(v)
+                vc = v - np.nanmean(v, axis=-1, keepdims=True)
+                out[f"{key}:{name}"] = 100.0 * np.nansum(np.where(ok, vc * t, 0), axis=-1) / np.maximum(
+                    np.sum(np.where(ok, t * t, 0), axis=-1), 1e-12)
+            out[f"glint_spacing:{name}"] = np.nanmean(spacing[:, h], axis=-1)
+            out[f"pupil_major:{name}"] = np.nanmean(axes[:, h, :, 0], axis=-1)
+            out[f"pupil_ratio:{name}"] = np.nanmean(axes[:, h, :, 1] / axes[:, h, :, 0], axis=-1)
+    return out
+
+
+def feature_reference(condition: str, first_head: str = "central") -> str | None:
+    """A feature condition at another head position is compared to the same quantity at the first."""
+    quantity, colon, head = condition.partition(":")
+    if colon and quantity in QUANTITIES and head != first_head:
+        return f"{quantity}:{first_head}"
+    return None
+
+
+def write_recording(path: str | Path, features: Features, eye: int, *, samples: int = 3,
+                    frame_noise_px: float = 0.0, rng: np.random.Generator | None = None) -> Path:
+    """Eye `eye` of simulated `features` as a recording (the convention above); each fixation becomes
+    `samples` samples with independent Gaussian noise of `frame_noise_px` on every centre."""
+    path = Path(path)
+    scene = load_scene(features.scene)
+    rng = rng or np.random.default_rng(0)
+    H, T = features.shape[2], features.shape[3]
+    w, h_mm = scene.screen.size
+    lines = [{"format": FORMAT, "version": VERSION, "created": "1970-01-01T00:00:00+00:00", "url": "simulated",
+              "note": "eyehil discrepancy: simulated subject", "device": None, "configuration": None,
+              "clock_sync": None, "host_clock": "monotonic, us", "scene": features.scene, "subject": f"eye{eye + 1}"}]
+    clock, seq = 0, 0
+    for h in range(H):
+        for t in range(T):
+            clock += 1000
+            target = features.targets[t] - scene.screen.centre
+            lines.append({"type": "target", "host_us": clock, "device_us": clock, "target_id": h * T + t,
+                          "x_mm": float(w / 2 - target[0]), "y_mm": float(h_mm / 2 - target[1]), "visible": True,
+                          "label": f"{getattr(features.head_positions[h], 'name', h)}/{t}"})
+            ok = bool(features.valid[eye, 0, h, t])
+            for _ in range(samples):
+                clock += 4000
+                seq += 1
+                centre = features.pupil_centre_px[eye, 0, h, t] + frame_noise_px * rng.standard_normal(2)
+                glints = features.glint_px[eye, 0, h, t] + frame_noise_px * rng.standard_normal((len(scene.leds), 2))
+                axes = features.pupil_axes_px[eye, 0, h, t]
+                eye_rec = {"eye": 0, "flags": DETECTED if ok else 0,
+                           "centre": [float(v) for v in np.nan_to_num(centre)],
+                           "axes": [float(v) for v in np.nan_to_num(axes)],
+                           "angle_deg": float(np.nan_to_num(features.pupil_angle_deg[eye, 0, h, t])),
+                           "confidence": 1.0 if ok else 0.0,
+                           "glints": [{"led": k, "flags": GLINT_VALID if ok else 0, "x": float(np.nan_to_num(g[0])),
+                                       "y": float(np.nan_to_num(g[1]))} for k, g in enumerate(glints)]}
+                lines.append({"type": "sample", "seq": seq, "frame_id": seq, "device_us": clock, "host_us": clock,
+                              "lost_before": 0, "skipped_before": 0, "target_id": h * T + t, "eyes": [eye_rec]})
+    lines.append({"type": "end", "host_us": clock, "samples": seq, "stats": {}, "status": None})
+    path.write_text("".join(json.dumps(x) + "\n" for x in lines), encoding="utf-8")
+    return path
+
+
+def recorded_features(paths: Sequence[str | Path], scene: Scene) -> Features:
+    """Fixation-mean features (E = one per recording, S = 1 right eye, H, T) of recordings of `scene`."""
+    H, T, L = len(scene.head_positions), len(scene.targets()), len(scene.leds)
+    out = empty_features(len(paths), scene, tuple(scene.head_positions), T, 1, scene.targets(), "recorded")
+    for e, path in enumerate(paths):
+        rec = read_recording(path)
+        if rec.header.get("scene", scene.name) != scene.name:
+            raise ValueError(f"{path}: recorded in scene {rec.header['scene']!r}, expected {scene.name!r}")
+        if len(rec) == 0:
+            raise ValueError(f"{path}: no samples")
+        if rec.glints.shape[2] < L:
+            raise ValueError(f"{path}: {rec.glints.shape[2]} glints per sample, the scene has {L} LEDs")
+        good = (rec.pupil_flags[:, 0] & DETECTED).astype(bool) & np.all(
+            (rec.glint_flags[:, 0, :L] & GLINT_VALID).astype(bool), axis=-1)
+        ids = rec.target_id
+        if np.any(ids >= H * T):
+            raise ValueError(f"{path}: target_id beyond the scene's {H} x {T} fixations")
+        for fix in range(H * T):
+            m = good & (ids == fix)
+            if not np.any(m):
+                continue
+            h, t = divmod(fix, T)
+            out.arrays["pupil_centre_px"][e, 0, h, t] = rec.centre[m, 0].mean(axis=0)
+            out.arrays["pupil_axes_px"][e, 0, h, t] = rec.axes[m, 0].mean(axis=0)
+            out.arrays["glint_px"][e, 0, h, t] = rec.glints[m, 0, :L].mean(axis=0)
+            out.arrays["pupil_valid"][e, 0, h, t] = True
+            out.arrays["glint_valid"][e, 0, h, t] = True
+            out.arrays["fixation_valid"][e, 0, h, t] = True
+    return out
+
+
+def measured_from_recordings(paths: Sequence[str | Path], experiment: str = "guestrin2006",
+                             source: str = "") -> Measured:
+    """Per-subject gaze and feature conditions of recordings (one per subject), paired by subject."""
+    from eyehil.analysis.discrepancy.metrics import experiment as get_experiment
+
+    if experiment != "guestrin2006":
+        raise ValueError("recordings are supported for the guestrin2006 experiment only")
+    if len(paths) < 2:
+        raise ValueError("measured recordings: at least 2 subjects")
+    exp = get_experiment(experiment)
+    scene = load_scene(exp.scene)
+    features = recorded_features(paths, scene)
+    metrics = exp.metrics([features], scene)[0]
+    names = [*exp.diagnostic_conditions(scene), *feature_conditions(features)]
+    values = np.array([metrics[c] for c in names])
+    keep = np.all(np.isfinite(values), axis=0)
+    if keep.sum() < 2:
+        raise ValueError("measured recordings: fewer than 2 subjects with every condition")
+    subjects = tuple(Path(p).stem for p, k in zip(paths, keep, strict=True) if k)
+    data = {c: MeasuredCondition.of(v[keep]) for c, v in zip(names, values, strict=True)}
+    return Measured(experiment, data, subjects, source or f"{len(subjects)} recordings", {})
+
+
+def load_recordings(folder: str | Path, experiment: str = "guestrin2006") -> Measured:
+    """Every *.jsonl recording in `folder` (sorted by name), one per subject."""
+    paths = sorted(Path(folder).glob("*.jsonl"))
+    if not paths:
+        raise FileNotFoundError(f"no *.jsonl recordings in {folder}")
+    return measured_from_recordings(paths, experiment, f"recordings in {folder}")

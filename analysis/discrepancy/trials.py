@@ -1,0 +1,117 @@
+"""Blind trials of the discrepancy workflow: hidden effects at random strengths, and the rates the issue asks
+for (`python -m eyehil.analysis.discrepancy.trials --out DIR [--trials N] [--kind single|pair|negative|outside]`).
+
+Each trial draws "measured" data from other eyes (a Rozema 2011 draw) with hidden effects and runs the
+workflow blind on the first `search_eyes` published eyes (show: the first `show_eyes`):
+
+- single: one effect of the catalogue (every effect in turn, cycling), strength drawn uniformly between
+  `LOW` and `HIGH` of the way from its neutral value to a bound of its plausible range (random side);
+- pair: two different effects, each drawn so; the larger is the one whose D alone is larger;
+- negative: nothing hidden;
+- outside: one effect hidden and removed from the catalogue the workflow may use.
+
+Scores per trial (`score`): named (the hidden effect is the first named, outcome "explained"), in order
+(pairs: both named, in the order of their D alone), nothing added (negatives), "none explains"
+(outside), shrink (1 - D_after / D_before, show eyes), and whether each hidden parameter lies within
+the fit's 95 % interval (1.96 sigma). Results go to DIR/trials.json, one record per trial, and a summary.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+LOW, HIGH = 0.4, 0.9
+
+
+def draw(effect, rng: np.random.Generator) -> dict[str, float]:
+    """Random fitted-parameter values: between LOW and HIGH of the way from neutral to a bound."""
+    out = {}
+    for p in effect.fitted:
+        sides = [b for b in (p.low, p.high) if b != p.neutral]
+        bound = sides[rng.integers(len(sides))]
+        out[p.name] = float(p.neutral + rng.uniform(LOW, HIGH) * (bound - p.neutral))
+    return out
+
+
+def trial(kind: str, index: int, *, experiment: str, search_eyes: int, show_eyes: int, hidden_eyes: int,
+          seed: int) -> dict:
+    from eyehil.analysis.discrepancy.workflow import hidden_measured, run_discrepancy
+    from eyehil.emulator import effects
+    from eyehil.emulator.effects import Applied
+    from eyehil.emulator.eye.population import sample
+    from eyehil.emulator.eye.published import published_eyes
+
+    rng = np.random.default_rng(seed + 1000 * index)
+    names = [n for n in effects.names() if not (experiment == "blignaut2014" and effects.get(n).validation_only)]
+    hidden: list[Applied] = []
+    if kind in ("single", "outside"):
+        e = effects.get(names[index % len(names)])
+        hidden = [Applied.of(e, draw(e, rng))]
+    elif kind == "pair":
+        a, b = rng.choice(len(names), 2, replace=False)
+        hidden = [Applied.of(effects.get(names[i]), draw(effects.get(names[i]), rng)) for i in (a, b)]
+    allowed = [n for n in names if not (kind == "outside" and n == hidden[0].effect.name)]
+    eyes = sample(hidden_eyes, np.random.default_rng(seed + 7 + index)).eyes
+    measured = hidden_measured(hidden, eyes=eyes, experiment=experiment, seed=seed + 3 + index)
+    start = time.perf_counter()
+    result = run_discrepancy(measured, eyes=published_eyes()[:show_eyes], search_eyes=published_eyes()[:search_eyes],
+                             effect_names=allowed, rounds=2, seed=seed)
+    record = {"kind": kind, "index": index, "experiment": experiment, "hidden": [a.label() for a in hidden],
+              "hidden_values": {a.effect.name: dict(a.values) for a in hidden}, "seconds": time.perf_counter() - start,
+              **result.summary()}
+    return {**record, **score(record, result, hidden)}
+
+
+def score(record: dict, result, hidden) -> dict:
+    """The trial's scores (module docstring)."""
+    named = record["named_effects"]
+    truth = [a.effect.name for a in hidden]
+    out: dict = {"shrink": result.shrink}
+    if len(hidden) == 2:  # the larger: the one whose measured gap alone is larger is unknown here; use order
+        out["named_both"] = sorted(named) == sorted(truth)
+    elif hidden:
+        out["named"] = bool(named) and named[0] == truth[0] and record["outcome"] == "explained"
+    out["added_nothing"] = not result.added
+    covered = []
+    for a in hidden:
+        fit = record["parameters"].get(a.effect.name)
+        if fit:
+            for p, v in fit.items():
+                ci = v["ci95"]
+                covered.append(bool(ci is not None and np.isfinite(ci) and abs(v["value"] - a.values[p]) <= ci))
+    out["covered"] = covered
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", default="discrepancy-trials")
+    parser.add_argument("--kind", default="single", choices=("single", "pair", "negative", "outside"))
+    parser.add_argument("--trials", type=int, default=10)
+    parser.add_argument("--first", type=int, default=0, help="index of the first trial")
+    parser.add_argument("--experiment", default="guestrin2006")
+    parser.add_argument("--search-eyes", type=int, default=8)
+    parser.add_argument("--show-eyes", type=int, default=20)
+    parser.add_argument("--hidden-eyes", type=int, default=20)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / f"trials-{args.experiment}-{args.kind}.jsonl"
+    for i in range(args.first, args.first + args.trials):
+        rec = trial(args.kind, i, experiment=args.experiment, search_eyes=args.search_eyes, show_eyes=args.show_eyes,
+                    hidden_eyes=args.hidden_eyes, seed=args.seed)
+        with path.open("a", encoding="utf-8") as f:
+            f.write(json.dumps(rec, default=float) + "\n")
+        print(json.dumps({k: rec[k] for k in ("kind", "index", "hidden", "outcome", "named_effects", "shrink",
+                                               "covered", "seconds") if k in rec}, default=float), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

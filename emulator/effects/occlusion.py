@@ -1,0 +1,51 @@
+"""A glint on the pupil's edge hides part of it, and the detected pupil centre moves away from the glint.
+
+Frame: image pixels. The forward model gives each fixation's pupil boundary as `pupil_points_px` (points
+evenly spaced around the apparent pupil, `pupil_points_valid`), whose mean is the pupil centre. A
+boundary point within `radius_px` of any glint is hidden by the glint's bright disc; a detector that
+estimates the centre from the visible boundary (a centroid, or an ellipse fit without robust outlier
+handling pulled by the gap) moves it by
+
+    delta = bias x (mean of the visible points - mean of all points),
+
+`bias` = 1 for a centroid of the visible edge, 0 for a detector that fits an ellipse robustly through the
+gap (Swirski, Bulling & Dodgson 2012, ETRA'12 173-176; Santini, Fuhl & Kasneci 2018, CVIU 170:40-50:
+occlusion by glints is the commonest failure of pupil detection). The shift is zero unless a glint is on
+the edge, so it acts at some targets and head positions only, in the direction away from the glint.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from eyehil.emulator.effects.base import Effect, Parameter, with_arrays
+from eyehil.emulator.features import Features
+
+
+class GlintOcclusion(Effect):
+    """The pupil centre pulled away from a glint that hides part of the pupil's edge (bias, 0..1)."""
+
+    name = "glint_occlusion"
+    stage = "features"
+    reference = "Swirski, Bulling & Dodgson 2012, ETRA'12 173-176; Santini, Fuhl & Kasneci 2018, CVIU 170:40-50"
+    prior = "0 for robust ellipse fitting, up to 1 for centroid detectors"
+    parameters = (
+        Parameter("bias", "", 0.0, 0.0, 1.0, neutral=0.0, doc="fraction of the visible-edge centroid's shift"),
+        Parameter("radius_px", "px", 4.0, 0.5, 20.0, fitted=False, doc="radius of a glint's bright disc"),
+    )
+
+    def perturb(self, features: Features, values: Mapping[str, float], rng: np.random.Generator | None,
+                **kwargs: object) -> Features:
+        bias, radius = float(values["bias"]), float(values["radius_px"])
+        points, ok = features.pupil_points_px, features.pupil_points_valid
+        gl = np.where(features.glint_valid[..., None], features.glint_px, np.inf)
+        dist = np.linalg.norm(points[..., :, None, :] - gl[..., None, :, :], axis=-1)  # (..., N, L)
+        visible = ok & np.all(dist > radius, axis=-1)
+        n_all, n_vis = np.sum(ok, axis=-1), np.sum(visible, axis=-1)
+        p = np.nan_to_num(points)
+        mean_all = np.sum(np.where(ok[..., None], p, 0.0), axis=-2) / np.maximum(n_all, 1)[..., None]
+        mean_vis = np.sum(np.where(visible[..., None], p, 0.0), axis=-2) / np.maximum(n_vis, 1)[..., None]
+        shift = np.where(((n_vis > 2) & (n_vis < n_all))[..., None], mean_vis - mean_all, 0.0)
+        return with_arrays(features, pupil_centre_px=features.pupil_centre_px + bias * shift)
