@@ -27,8 +27,9 @@ import pytest
 
 from eyehil.analysis.discrepancy.data import Measured, MeasuredCondition, guestrin2006_real, load
 from eyehil.analysis.discrepancy.guestrin import guestrin_metrics
+from eyehil.analysis.discrepancy.measured import load_recordings
 from eyehil.analysis.discrepancy.metrics import Evaluator
-from eyehil.analysis.discrepancy.recording import load_recordings, write_recording
+from eyehil.analysis.discrepancy.recording import write_recording
 from eyehil.analysis.discrepancy.search import max_evaluations, search_effects
 from eyehil.analysis.discrepancy.stats import compare, holm, normal_score, permutation_gof, permutation_p
 from eyehil.analysis.discrepancy.workflow import find, hidden_measured, run_discrepancy

@@ -3,6 +3,9 @@ show the gap shrink (docs/discrepancy.md).
 
 - `workflow`: `run_discrepancy`, `hidden_measured` (the rounds of find, name, add; then show);
 - `data`: measured data (per-condition errors of real subjects); `metrics`: the experiments compared;
+- `recording`: eyehil recordings as measured subjects (features per target and head position);
+- `measured`: measured data from a built-in set, a file or a folder of recordings (`--measured`);
 - `guestrin`: the Guestrin 2006 experiment batched over eyes; `stats`: per-condition tests and the gap measure;
-- `search`: fitting an effect's parameters; `report`: the output folder; `cli`: `eyehil discrepancy`.
+- `search`: fitting an effect's parameters; `report`: the output folder; `cli`: `eyehil discrepancy`;
+- `trials`: blind trials at random strengths and their rates (``python -m eyehil.analysis.discrepancy.trials``).
 """

@@ -40,7 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _measured(args: argparse.Namespace):
-    from eyehil.analysis.discrepancy.data import measured_from_spec
+    from eyehil.analysis.discrepancy.measured import measured_from_spec
     from eyehil.analysis.discrepancy.workflow import hidden_measured
     from eyehil.emulator.effects import parse
     from eyehil.emulator.eye.population import sample

@@ -147,15 +147,3 @@ def blignaut2014_real() -> Measured:
 
 
 BUILTIN = {"guestrin2006": guestrin2006_real, "blignaut2014": blignaut2014_real}
-
-
-def measured_from_spec(spec: str) -> Measured:
-    """A built-in data set by name (guestrin2006, blignaut2014), a folder of recordings (one *.jsonl per
-    subject, `eyehil.analysis.discrepancy.recording`) or a measured-data file path."""
-    if spec in BUILTIN:
-        return BUILTIN[spec]()
-    if Path(spec).is_dir():
-        from eyehil.analysis.discrepancy.recording import load_recordings
-
-        return load_recordings(spec)
-    return load(spec)

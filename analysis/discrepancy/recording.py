@@ -32,7 +32,6 @@ from pathlib import Path
 
 import numpy as np
 
-from eyehil.analysis.discrepancy.data import Measured, MeasuredCondition
 from eyehil.drivers.recording import FORMAT, VERSION, read_recording
 from eyehil.emulator.features import Features, empty_features
 from eyehil.emulator.scene import Scene, load_scene
@@ -148,34 +147,3 @@ def recorded_features(paths: Sequence[str | Path], scene: Scene) -> Features:
             out.arrays["glint_valid"][e, 0, h, t] = True
             out.arrays["fixation_valid"][e, 0, h, t] = True
     return out
-
-
-def measured_from_recordings(paths: Sequence[str | Path], experiment: str = "guestrin2006",
-                             source: str = "") -> Measured:
-    """Per-subject gaze and feature conditions of recordings (one per subject), paired by subject."""
-    from eyehil.analysis.discrepancy.metrics import experiment as get_experiment
-
-    if experiment != "guestrin2006":
-        raise ValueError("recordings are supported for the guestrin2006 experiment only")
-    if len(paths) < 2:
-        raise ValueError("measured recordings: at least 2 subjects")
-    exp = get_experiment(experiment)
-    scene = load_scene(exp.scene)
-    features = recorded_features(paths, scene)
-    metrics = exp.metrics([features], scene)[0]
-    names = [*exp.diagnostic_conditions(scene), *feature_conditions(features)]
-    values = np.array([metrics[c] for c in names])
-    keep = np.all(np.isfinite(values), axis=0)
-    if keep.sum() < 2:
-        raise ValueError("measured recordings: fewer than 2 subjects with every condition")
-    subjects = tuple(Path(p).stem for p, k in zip(paths, keep, strict=True) if k)
-    data = {c: MeasuredCondition.of(v[keep]) for c, v in zip(names, values, strict=True)}
-    return Measured(experiment, data, subjects, source or f"{len(subjects)} recordings", {})
-
-
-def load_recordings(folder: str | Path, experiment: str = "guestrin2006") -> Measured:
-    """Every *.jsonl recording in `folder` (sorted by name), one per subject."""
-    paths = sorted(Path(folder).glob("*.jsonl"))
-    if not paths:
-        raise FileNotFoundError(f"no *.jsonl recordings in {folder}")
-    return measured_from_recordings(paths, experiment, f"recordings in {folder}")

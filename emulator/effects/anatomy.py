@@ -48,6 +48,7 @@ class CornealAstigmatism(Effect):
     """Corneal astigmatism: power vectors (J0, J45; D) added to the anterior and posterior cornea."""
 
     name = "corneal_astigmatism"
+    prior = "anterior J0 0.30 +- 0.29 D, J45 0.06 +- 0.23 D (Rozema 2011; with-the-rule in most adults)"
     reference = ("Thibos, Wheeler & Horner 1997, Optom Vis Sci 74:367-375 (power vectors); Rozema, Atchison & "
                  "Tassignon 2011, IOVS 52:4525-4533 (population: anterior J0 0.30 +- 0.29 D, J45 0.06 +- 0.23 D)")
     parameters = (
@@ -73,6 +74,7 @@ class CorneaTilt(Effect):
     """Tilt of the cornea (both surfaces) about gkaModelEye's corneal centre, 14.26 mm deep (deg nasal, superior)."""
 
     name = "cornea_tilt"
+    prior = "about 2.5 deg nasal (gkaModelEye, Navarro 2006); the spread between eyes is not well published"
     reference = ("Navarro, Gonzalez & Hernandez 2006, JOSA A 23:219-232; gkaModelEye (Aguirre 2019) uses 2.5 deg "
                  "nasal")
     parameters = (
@@ -91,6 +93,7 @@ class CorneaDecentre(Effect):
     """Displacement of the cornea (both surfaces) from the optic axis of pupil and lens (mm nasal, mm superior)."""
 
     name = "cornea_decentre"
+    prior = "tenths of a mm; gkaModelEye puts the apex 0.62 mm nasal of the stop's axis"
     reference = "gkaModelEye (Aguirre 2019): the turned cornea's apex lies 0.62 mm nasal of the stop's axis"
     parameters = (
         Parameter("nasal_mm", "mm", 0.0, -1.0, 1.0, doc="corneal apex toward the nose (right eye +x)"),
@@ -109,6 +112,7 @@ class PupilEllipse(Effect):
     """Elliptical aperture stop of the pupil's area: eccentricity and major-axis angle (deg, nasal -> up)."""
 
     name = "pupil_ellipse"
+    prior = "eccentricity 0 to about 0.12 (Wyatt 1995; gkaModelEye's stop)"
     reference = ("Wyatt 1995, Vision Res 35:2021-2036; gkaModelEye's stop (eccentricity up to about 0.12, "
                  "axis 0 or 77 deg)")
     parameters = (
