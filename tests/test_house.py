@@ -134,6 +134,12 @@ def test_the_walker_sees_a_circle_and_a_wrong_way_import(tmp_path: Path) -> None
         GRAPH.update(saved)
 
 
+def test_every_folder_of_python_modules_is_a_package() -> None:
+    """setup.py installs packages (folders with __init__.py): a folder without one is left out of the wheel."""
+    folders = {p.parent for layer in ("eyehil", *LAYERS) for p in (ROOT / layer).rglob("*.py")}
+    assert not sorted(str(f.relative_to(ROOT)) for f in folders if not (f / "__init__.py").is_file())
+
+
 def test_every_package_docstring_names_its_modules() -> None:
     missing = []
     for name, path in MODULES.items():
