@@ -54,15 +54,20 @@ def guestrin_metrics(features: Features, host: Scene, *, start: np.ndarray | Non
     fit = calibrate_many(geometry, central, targets, options="best", start=start)
     params = fit.params
     estimate = fit.estimate(s)
+    return error_conditions(estimate, targets, features.head_positions), params
+
+
+def error_conditions(estimate: np.ndarray, targets: np.ndarray, head_positions) -> dict[str, np.ndarray]:
+    """Per-eye gaze-error conditions (deg) of estimates shaped (eyes, heads, targets, 2): H1 (central head),
+    H2 (the others), head:<name>, and the signed biases bias_x / bias_y of H1 and H2."""
     error = on_screen_error_deg(estimate, targets)
     signed = np.degrees(np.arctan((estimate - targets) / STUDY_VIEWING_DISTANCE_MM))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows: eyes that could not be calibrated
         out = {"H1": np.nanmean(error[:, 0], axis=-1), "H2": np.nanmean(error[:, 1:], axis=(1, 2))}
-        for h, head in enumerate(features.head_positions[1:], start=1):
+        for h, head in enumerate(head_positions[1:], start=1):
             out[f"head:{getattr(head, 'name', h)}"] = np.nanmean(error[:, h], axis=-1)
         for key, part in (("H1", signed[:, :1]), ("H2", signed[:, 1:])):
             out[f"bias_x:{key}"] = np.nanmean(part[..., 0], axis=(1, 2))
             out[f"bias_y:{key}"] = np.nanmean(part[..., 1], axis=(1, 2))
-    return out, params
-
+    return out

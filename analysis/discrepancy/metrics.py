@@ -23,20 +23,18 @@ The host always keeps the nominal scene.
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from eyehil.analysis.discrepancy.guestrin import START, guestrin_metrics
+from eyehil.analysis.discrepancy.guestrin import START, error_conditions, guestrin_metrics
 from eyehil.analysis.discrepancy.recording import feature_conditions, feature_reference
 from eyehil.analysis.study import experiments
 from eyehil.analysis.study.bridge import eye_samples, screen_targets, tracker_geometry
 from eyehil.analysis.study.published import CONFIGURATIONS
 from eyehil.analysis.study.summary import best_functions
-from eyehil.drivers.gaze.base import STUDY_VIEWING_DISTANCE_MM, on_screen_error_deg
 from eyehil.drivers.gaze.forms import MODELS
 from eyehil.drivers.gaze.guestrin import EyeParameters, point_of_gaze
 from eyehil.emulator.effects import Applied
@@ -130,17 +128,7 @@ def guestrin_metrics_at(features: Features, host: Scene, params: np.ndarray, sid
     x = np.where(ok[:, None], params, START)
     estimate = point_of_gaze(geometry, s, EyeParameters(*(x[:, i][:, None, None] for i in range(4))))
     estimate = np.where(ok[:, None, None, None], estimate, np.nan)
-    error = on_screen_error_deg(estimate, targets)
-    signed = np.degrees(np.arctan((estimate - targets) / STUDY_VIEWING_DISTANCE_MM))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows: eyes that could not be calibrated
-        out = {"H1": np.nanmean(error[:, 0], axis=-1), "H2": np.nanmean(error[:, 1:], axis=(1, 2))}
-        for h, head in enumerate(features.head_positions[1:], start=1):
-            out[f"head:{getattr(head, 'name', h)}"] = np.nanmean(error[:, h], axis=-1)
-        for key, part in (("H1", signed[:, :1]), ("H2", signed[:, 1:])):
-            out[f"bias_x:{key}"] = np.nanmean(part[..., 0], axis=(1, 2))
-            out[f"bias_y:{key}"] = np.nanmean(part[..., 1], axis=(1, 2))
-    return out
+    return error_conditions(estimate, targets, features.head_positions)
 
 
 EXPERIMENTS = {"guestrin2006": GuestrinExperiment, "blignaut2014": BlignautExperiment}
