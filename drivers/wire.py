@@ -163,7 +163,12 @@ class Wire:
                 link.timeout = wait_s
                 data = link.read(1)
                 link.timeout = 0
-                data += link.read(CHUNK) if data else b""
+                if data:
+                    try:
+                        data += link.read(CHUNK)
+                    except OSError:  # the byte that arrived is not lost: decode it, then report the failure
+                        self._feed(data)
+                        raise
             return data
         except OSError as exc:
             raise LinkError(f"read failed: {exc}") from exc
@@ -172,12 +177,16 @@ class Wire:
         """Read and dispatch what arrives within `wait_s` s; return the number of bytes read."""
         data = self._read(max(0.0, wait_s))
         if data:
-            now = host_now_us()
-            for event in self.receiver.feed(data):
-                if isinstance(event, Received):
-                    self._dispatch(event, now)
-            self._sync_counters()
+            self._feed(data)
         return len(data)
+
+    def _feed(self, data: bytes) -> None:
+        """Decode `data` and dispatch its samples, replies and image chunks."""
+        now = host_now_us()
+        for event in self.receiver.feed(data):
+            if isinstance(event, Received):
+                self._dispatch(event, now)
+        self._sync_counters()
 
     def _dispatch(self, event: Received, now: int) -> None:
         message = event.message

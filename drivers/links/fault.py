@@ -95,6 +95,13 @@ class FaultLog:
     disconnects: int = 0
     in_order: list[int] = field(default_factory=list)  # seqs delivered intact after every lower one delivered
     last_in_order: int | None = None  # the highest seq delivered intact
+    bytes_read: int = 0  # bytes the host has read from the wrapper
+    damaged_ends: list[int] = field(default_factory=list)  # stream offsets where each damaged copy ends
+
+    @property
+    def damaged_read(self) -> int:
+        """Damaged frame copies the host has read in full (a corrupted frame delivered twice counts twice)."""
+        return sum(1 for end in self.damaged_ends if end <= self.bytes_read)
 
 
 class FaultLink:
@@ -106,8 +113,9 @@ class FaultLink:
         self.log = FaultLog()
         self._partial = bytearray()
         self._ready = bytearray()
-        self._held: list[tuple[float, int | None, bytes]] = []  # (due time, seq, frame) delayed
-        self._swap: tuple[int | None, bytes] | None = None  # a frame waiting to be delivered after the next one
+        self._held: list[tuple[float, int | None, bytes, bool]] = []  # (due time, seq, frame, damaged) delayed
+        self._swap: tuple[bytes, int | None, bool] | None = None  # a frame to deliver after the next one
+        self._queued = 0  # bytes ever put in `_ready`
         self._down = 0  # frames still to lose in the current outage
         self._failed = False  # the next read/write raises once
 
@@ -131,6 +139,7 @@ class FaultLink:
         self._raise_if_failed()
         data = bytes(self._ready[:size])
         del self._ready[:size]
+        self.log.bytes_read += len(data)
         return data
 
     def write(self, data: bytes) -> int | None:
@@ -152,7 +161,7 @@ class FaultLink:
 
     def _frame(self, frame: bytes) -> None:
         if frame == b"\x00":  # an empty frame (a lone delimiter) carries nothing: pass it on
-            self._ready += frame
+            self._deliver(frame, None)
             return
         spec, log = self.spec, self.log
         log.frames += 1
@@ -171,24 +180,25 @@ class FaultLink:
         if r() < spec.drop:
             log.dropped.append(index)
             return
-        intact = True
+        damaged = False
         if r() < spec.corrupt:
             log.corrupted.append(index)
-            frame, intact = _flip_one_bit(frame, self.rng), False
+            frame, damaged = _flip_one_bit(frame, self.rng), True
+        seq = None if damaged else index
         if r() < spec.delay_p and spec.delay_s > 0:
             log.delayed.append(index)
-            self._held.append((self.now() + spec.delay_s, index if intact else None, frame))
+            self._held.append((self.now() + spec.delay_s, seq, frame, damaged))
             return
         copies = 2 if r() < spec.duplicate else 1
         if copies == 2:
             log.duplicated.append(index)
         if self._swap is None and r() < spec.reorder:
             log.reordered.append(index)
-            self._swap = (index if intact else None, frame * copies)
+            self._swap = (frame * copies, seq, damaged)
             return
-        self._deliver(frame * copies, index if intact else None)
+        self._deliver(frame * copies, seq, damaged)
         if self._swap is not None:
-            self._deliver(*reversed(self._swap))
+            self._deliver(*self._swap)
             self._swap = None
 
     def _release_held(self) -> None:
@@ -196,11 +206,15 @@ class FaultLink:
         due = [h for h in self._held if h[0] <= now]
         if due:
             self._held = [h for h in self._held if h[0] > now]
-            for _, seq, frame in due:
-                self._deliver(frame, seq)
+            for _, seq, frame, damaged in due:
+                self._deliver(frame, seq, damaged)
 
-    def _deliver(self, frames: bytes, seq: int | None) -> None:
-        """Hand `frames` (one frame, or the same frame twice) to the host; `seq` None if damaged."""
+    def _deliver(self, frames: bytes, seq: int | None, damaged: bool = False) -> None:
+        """Hand `frames` (one frame, or the same frame twice) to the host; `seq` None if damaged or unknown."""
+        if damaged:  # where each copy ends in the stream the host reads
+            size = len(frames) // frames.count(0)
+            self.log.damaged_ends += [self._queued + size * (k + 1) for k in range(frames.count(0))]
+        self._queued += len(frames)
         self._ready += frames
         last = self.log.last_in_order
         if seq is not None and (last is None or seq > last):

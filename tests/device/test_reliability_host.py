@@ -10,7 +10,7 @@ import pytest
 from device_helpers import CoreHost, core_device
 
 from eyehil.drivers.client import MAX_DRAIN_BYTES, Tracker
-from eyehil.drivers.errors import TrackerError, TrackerTimeoutError
+from eyehil.drivers.errors import LinkError, TrackerError, TrackerTimeoutError
 from eyehil.drivers.links.tcp import TcpPort
 from eyehil.drivers.wire import Wire
 from eyehil.protocols import (
@@ -142,6 +142,39 @@ def test_duplicated_and_reordered_samples_are_dropped_and_loss_is_exact() -> Non
     assert len(ids) == len(set(ids)) and ids == sorted(ids)
     assert wire.stats.duplicates_dropped == 2
     assert wire.stats.lost_frames == 100 - len(ids) == 2  # 20 (late) and 50
+
+
+class FailsAfterOneByte:
+    """A link whose waiting read returns one byte and whose next read fails (a disconnect mid-read)."""
+
+    timeout = 0.0
+
+    def __init__(self, data: bytes) -> None:
+        self.data, self.reads = data, 0
+
+    def read(self, size: int = 1) -> bytes:
+        self.reads += 1
+        if self.reads == 1:
+            return b""  # nothing waiting: the wire blocks for one byte
+        if self.reads == 2:
+            return self.data[:1]
+        raise ConnectionResetError("gone")
+
+    def write(self, data: bytes) -> int:
+        return len(data)
+
+    def close(self) -> None:
+        pass
+
+
+def test_a_read_that_fails_after_one_byte_loses_nothing() -> None:
+    """The byte that arrived before the failure is decoded (here: the delimiter that completes a sample)."""
+    frame = encode(_features(7), 7, 0)
+    wire = Wire(FailsAfterOneByte(frame[-1:]))
+    wire.receiver.feed(frame[:-1])  # the frame so far, all but its delimiter
+    with pytest.raises(LinkError):
+        wire.pump(0.01)
+    assert [s.seq for s in wire.samples] == [7]
 
 
 # --- finding 9: every blocking host call has a deadline ---------------------------------------------------------------
