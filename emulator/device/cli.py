@@ -114,10 +114,9 @@ class ViewBlink:
     def __init__(self, core) -> None:
         self.core = core
 
-    def blink(self, duration_s: float) -> None:
-        """Close the eyes for `duration_s` seconds, starting in `LEAD_US`."""
-        start = self.core.clock.now_us() + self.LEAD_US
-        self.core.subject.blinks._intervals.append((start, start + round(duration_s * 1e6)))
+    def blink(self, duration_s: float) -> bool:
+        """Close the eyes for `duration_s` seconds, starting in `LEAD_US`; False if too many are pending."""
+        return self.core.subject.blink(self.core.clock.now_us() + self.LEAD_US, duration_s)
 
 
 def _view_starter(args: argparse.Namespace):

@@ -87,6 +87,18 @@ class BlinkProcess:
             closed |= (times_us >= start) & (times_us < stop)
         return closed
 
+    MAX_PENDING = 64  # requested closures held at once (a page hammering its blink button cannot grow the list)
+
+    def close(self, start_us: int, duration_s: float) -> bool:
+        """Close the eyes from `start_us` (device clock, us) for `duration_s` s (0 < duration <= 5 s), besides the
+        spontaneous blinks; False (nothing added) if `MAX_PENDING` closures are already pending."""
+        if not 0.0 < duration_s <= 5.0:
+            raise ValueError(f"blink duration {duration_s} s not in (0, 5]")
+        if len(self._intervals) >= self.MAX_PENDING:
+            return False
+        self._intervals.append((int(start_us), int(start_us) + round(duration_s * 1e6)))
+        return True
+
 
 class Subject:
     """A subject with one eye anatomy (both eyes alike), a head pose and a behaviour; see the module docstring."""
@@ -118,6 +130,10 @@ class Subject:
             solver.exact(np.array([start]))  # where the subject looks until the first stimulus
             if exact_wait_s == 0:
                 solver.field  # noqa: B018 - never waiting later: the grid must be there before the first stimulus
+
+    def blink(self, start_us: int, duration_s: float) -> bool:
+        """Close the eyes at `start_us` (device clock, us) for `duration_s` s; see `BlinkProcess.close`."""
+        return self.blinks.close(start_us, duration_s)
 
     @property
     def screen_centre(self) -> np.ndarray:
