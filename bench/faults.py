@@ -58,7 +58,8 @@ def report(results: dict) -> str:
     ok = all(v == "held" for v in results["verdicts"].values())
     faults = ", ".join(f"{k} {v}" for k, v in results["faults"].items())
     lines = [f"faults: {results['samples']:,} samples at 1 kHz ({results['samples'] / 1000:.0f} s simulated, "
-             f"{results['cpu_s']:.0f} s CPU); injected into {results['frames']:,} frames: {faults}; host: lost {results['lost_frames']}, "
+             f"{results['cpu_s']:.0f} s CPU); injected into {results['frames']:,} frames: {faults}; "
+             f"host: lost {results['lost_frames']}, "
              f"CRC errors {results['crc_errors']}, duplicates dropped {results['duplicates_dropped']}, "
              f"reconnects {results['reconnects']} -> {'PASS' if ok else 'FAIL'}"]
     lines += [f"  {name.removeprefix('test_').replace('_', ' ')}: {verdict}"

@@ -55,17 +55,24 @@ def serve(argv: list[str]) -> None:
 
 
 @contextmanager
-def facade(*extra: str):
-    """Start the facade process; yield its Pupil Remote port."""
+def facade_process(*extra: str):
+    """Start the facade process; yield its Pupil Remote port and the process."""
     proc = subprocess.Popen([sys.executable, "-m", "bench.zmq", "serve", *extra], stdout=subprocess.PIPE, text=True)
     try:
         line = proc.stdout.readline()
         if not line.startswith("port:"):
             raise RuntimeError("the facade did not start")
-        yield int(line.split()[1])
+        yield int(line.split()[1]), proc
     finally:
         proc.terminate()
         proc.wait(timeout=20)
+
+
+@contextmanager
+def facade(*extra: str):
+    """Start the facade process; yield its Pupil Remote port."""
+    with facade_process(*extra) as (port, _):
+        yield port
 
 
 def clock_offset(req: zmq.Socket, n: int = 10) -> float:
