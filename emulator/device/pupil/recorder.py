@@ -28,17 +28,24 @@ import time
 import uuid
 from array import array
 from dataclasses import dataclass
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any, BinaryIO, TextIO
 
 import msgpack
 import numpy as np
 
-from eyehil import __version__
-
 KINDS = ("pupil", "gaze", "notify", "annotation")
 BUFFER_BYTES = 1 << 20
 MAX_SUFFIX = 999
+
+
+def _version() -> str:
+    """eyehil's installed version (as `eyehil.__version__`, which the emulator may not import)."""
+    try:
+        return version("eyehil")
+    except PackageNotFoundError:
+        return "0+unknown"
 
 
 @dataclass
@@ -94,7 +101,7 @@ class Recording:
         self.written = self.dropped = 0  # datums
         self.info: dict[str, Any] = {
             "recording_name": name, "recording_uuid": str(uuid.uuid4()), "recording_software_name": "eyehil",
-            "recording_software_version": __version__, "start_time_synced_s": float(start_synced_s),
+            "recording_software_version": _version(), "start_time_synced_s": float(start_synced_s),
             "start_time_system_s": time.time(), "duration_s": 0.0}
         self._write_info()
         self._writers = {kind: _PLDataWriter(folder, kind) for kind in KINDS}
