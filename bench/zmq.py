@@ -42,13 +42,15 @@ def serve(argv: list[str]) -> None:
     p = argparse.ArgumentParser(prog="python -m bench.zmq serve")
     p.add_argument("--rate", type=int, default=RATE_HZ)
     p.add_argument("--frame-rate", type=float, default=FRAME_HZ)
+    p.add_argument("--world-rate", type=float, default=0.0, help="frame.world per second (0: none, as measured)")
     p.add_argument("--switch", type=float, default=SWITCH_INTERVAL_S, help="sys.setswitchinterval (s)")
     args = p.parse_args(argv)
     sys.setswitchinterval(args.switch)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     subject = build_subject(DeviceOptions(scene="guestrin2006", script="demo"))
-    options = ServerOptions(port=0, rate_hz=args.rate, frame_rate_hz=args.frame_rate, frame_size=None)
+    options = ServerOptions(port=0, rate_hz=args.rate, frame_rate_hz=args.frame_rate, frame_size=None,
+                            world_rate_hz=args.world_rate)
     with PupilServer(subject, options=options) as server:
         print(f"port: {server.port}", flush=True)
         stop.wait()

@@ -9,38 +9,9 @@ import time
 import cv2
 import numpy as np
 import pytest
-from pupil_labs.pupil_core_network_client import Device
 from zmq_helpers import eventually, subscribed, topic_is, wait_for
 
 from eyehil.protocols.pupil import VERSION
-
-
-@pytest.fixture
-def device_of():
-    """device_of(server) -> a connected real client; disconnected after the test."""
-    made = []
-
-    def connect(server) -> Device:
-        made.append(Device("127.0.0.1", server.port))
-        return made[-1]
-
-    yield connect
-    for d in made:
-        d.disconnect()
-
-
-@pytest.fixture
-def subscribe():
-    """subscribe(device, topics) -> a background subscription; disconnected after the test."""
-    subs = []
-
-    def make(device: Device, topics):
-        subs.append(device.subscribe_in_background(topics, buffer_size=2000))
-        return subs[-1]
-
-    yield make
-    for s in subs:
-        s.disconnect()
 
 
 def test_connect_version_and_clock_offset(server, device_of) -> None:

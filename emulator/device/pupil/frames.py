@@ -10,8 +10,8 @@ Payload (`eyehil.protocols.pupil.frame_datum`): {topic, width, height, index, ti
 ``gray`` H x W bytes, ``bgr`` H x W x 3 (the gray value in each channel), ``jpeg`` (`cv2.imencode`, a
 one-channel JPEG). `index` counts the images offered per eye, including those dropped, so a subscriber sees
 gaps. The core thread `offer`s; the frame thread ("eyehil-zmq-frames") renders and publishes on its own PUB.
-Capacity: at most `QUEUE` exposures wait; an exposure offered to a full queue is dropped (`dropped` counts
-images), so rendering never delays the pupil datums.
+Capacity (`ImageThread`, shared with the world view, `pupil/world.py`): at most `QUEUE` exposures wait; an
+exposure offered to a full queue is dropped (`dropped` counts images), so rendering never delays the pupil datums.
 """
 
 from __future__ import annotations
@@ -57,36 +57,84 @@ def encode_image(image: np.ndarray, fmt: str) -> bytes:
     return np.ascontiguousarray(image).tobytes()
 
 
-class FramePublisher:
-    """Renders and publishes eye images; see the module docstring."""
+class ImageThread:
+    """A thread that renders and publishes images on its own PUB (connected to the backbone's XSUB), fed
+    through a queue of at most `QUEUE` jobs: a job offered to a full queue is dropped and its `images`
+    counted in `dropped`, so the offering thread never waits. Subclasses draw and send in `_publish(job)`."""
 
-    def __init__(self, context: zmq.Context, endpoint: str, renderer: ExposureRenderer, windows: list[EyeWindow],
-                 *, seed: int = 0, hwm: int = 1000) -> None:
-        """Publish to the backbone's XSUB at `endpoint`; call `start`, then `close`."""
-        self.renderer, self.windows, self.seed = renderer, windows, seed
+    THREAD_NAME = "eyehil-zmq-images"
+
+    def __init__(self, context: zmq.Context, endpoint: str, hwm: int) -> None:
         self.dropped = self.published = 0
-        self._counts = [0] * len(windows)
-        self._open: dict[int, np.ndarray] = {}  # last open-eye row per tracked eye
-        self._queue: queue.Queue[FrameJob] = queue.Queue(QUEUE)
+        self._queue: queue.Queue = queue.Queue(QUEUE)
         self._stop = threading.Event()
         self._pub = context.socket(zmq.PUB)
         self._pub.setsockopt(zmq.LINGER, 0)
         self._pub.setsockopt(zmq.SNDHWM, hwm)
         self._pub.connect(endpoint)
-        self._thread = threading.Thread(target=self._run, name="eyehil-zmq-frames", daemon=True)
+        self._thread = threading.Thread(target=self._run, name=self.THREAD_NAME, daemon=True)
 
     def start(self) -> None:
         self._thread.start()
+
+    def _submit(self, job: object, images: int) -> None:
+        """Queue `job` (worth `images` images), or drop and count it if the queue is full."""
+        try:
+            self._queue.put_nowait((job, images))
+        except queue.Full:
+            self.dropped += images
+
+    def _run(self) -> None:
+        try:
+            while not self._stop.is_set():
+                try:
+                    job, _ = self._queue.get(timeout=POLL_S)
+                except queue.Empty:
+                    continue
+                self._publish(job)
+        finally:
+            self._pub.close(linger=0)
+
+    def _publish(self, job: object) -> None:
+        raise NotImplementedError
+
+    def _send(self, message: dict) -> None:
+        self._pub.send_multipart(pack(message), copy=False)
+        self.published += 1
+
+    def close(self) -> None:
+        """Stop the thread (jobs waiting are dropped and counted) and close the socket."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join()
+        else:
+            self._pub.close(linger=0)
+        while True:
+            try:
+                self.dropped += self._queue.get_nowait()[1]
+            except queue.Empty:
+                break
+
+
+class FramePublisher(ImageThread):
+    """Renders and publishes eye images; see the module docstring."""
+
+    THREAD_NAME = "eyehil-zmq-frames"
+
+    def __init__(self, context: zmq.Context, endpoint: str, renderer: ExposureRenderer, windows: list[EyeWindow],
+                 *, seed: int = 0, hwm: int = 1000) -> None:
+        """Publish to the backbone's XSUB at `endpoint`; call `start`, then `close`."""
+        super().__init__(context, endpoint, hwm)
+        self.renderer, self.windows, self.seed = renderer, windows, seed
+        self._counts = [0] * len(windows)
+        self._open: dict[int, np.ndarray] = {}  # last open-eye row per tracked eye
 
     def offer(self, frame_id: int, timestamp: float, values: np.ndarray, blink: bool, fmt: str) -> None:
         """An exposure whose images are due (`values` (E, C) of the tracked eyes); called by the core thread."""
         rows = np.stack([self._row(e, values[e], blink) for e in range(len(values))])
         indices = tuple(self._counts)
         self._counts = [c + 1 for c in self._counts]
-        try:
-            self._queue.put_nowait(FrameJob(frame_id, timestamp, rows, indices, fmt))
-        except queue.Full:
-            self.dropped += len(self.windows)
+        self._submit(FrameJob(frame_id, timestamp, rows, indices, fmt), len(self.windows))
 
     def _row(self, e: int, row: np.ndarray, blink: bool) -> np.ndarray:
         if not blink:
@@ -94,17 +142,6 @@ class FramePublisher:
             return row
         last = self._open.get(e)
         return row if last is None else closed(last, self.renderer.layout)
-
-    def _run(self) -> None:
-        try:
-            while not self._stop.is_set():
-                try:
-                    job = self._queue.get(timeout=POLL_S)
-                except queue.Empty:
-                    continue
-                self._publish(job)
-        finally:
-            self._pub.close(linger=0)
 
     def _publish(self, job: FrameJob) -> None:
         """Render the job's windows (once per distinct window) and send one message per eye."""
@@ -116,15 +153,4 @@ class FramePublisher:
                 rng = exposure_rng(self.seed, job.frame_id, win.eye_id)
                 frame = render_region(self.renderer, job.rows, eyes, region, rng)
                 drawn[region] = encode_image(frame.image, job.fmt)
-            message = frame_datum(win.eye_id, index, job.timestamp, win.width, win.height, job.fmt, drawn[region])
-            self._pub.send_multipart(pack(message), copy=False)
-            self.published += 1
-
-    def close(self) -> None:
-        """Stop the thread (images waiting are dropped) and close the socket."""
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join()
-        else:
-            self._pub.close(linger=0)
-        self.dropped += self._queue.qsize() * len(self.windows)
+            self._send(frame_datum(win.eye_id, index, job.timestamp, win.width, win.height, job.fmt, drawn[region]))
