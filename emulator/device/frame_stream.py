@@ -75,7 +75,7 @@ class FrameStream:
         self.renderer, self.tracked, self.options = renderer, tracked, options or FrameOptions()
         self.sent = self.dropped = self.render_failures = 0
         self.on_done: Callable[[], None] | None = None  # called from a pool thread when an image is rendered
-        self._pool: RenderPool | None = None  # made at the first start (workers start then)
+        self._pool = RenderPool(renderer, self.options.workers, on_done=self._done)  # workers start now
         self._sel: Selection | None = None
         self._ahead: deque[tuple[int, int, list[tuple[Eye, Future]]]] = deque()  # (frame id, time, images)
         self._queue: deque[tuple[FrameChunk, int, bool]] = deque()  # chunks not yet released: timestamp, last of
@@ -115,8 +115,6 @@ class FrameStream:
         self._ahead.clear()
         self._queued_exposures = 0
         self._open.clear()
-        if self._pool is None:
-            self._pool = RenderPool(self.renderer, self.options.workers, on_done=self._done)
 
     def _done(self) -> None:
         if self.on_done is not None:
@@ -136,9 +134,7 @@ class FrameStream:
 
     def close(self) -> None:
         """Stop the render workers; idempotent."""
-        if self._pool is not None:
-            self._pool.close()
-            self._pool = None
+        self._pool.close()
 
     def _per_exposure(self) -> int:
         return 0 if self._sel is None else len(self._sel.eyes) if self._sel.roi is None else 1

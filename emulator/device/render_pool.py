@@ -9,7 +9,10 @@ publishes encoded images, the encoded bytes):
 - ``workers=0``: rendered at `submit` on the caller's thread (the future is already done; deterministic);
 - ``kind="process"`` (default): `workers` processes (started with ``spawn``, so no thread or socket of the
   device is inherited), each holding the `ExposureRenderer` given at start; a job crosses a pipe as its rows
-  (about 3 kB) and comes back as its pixels (77 kB for 320 x 240);
+  (about 3 kB) and comes back as its pixels (77 kB for 320 x 240). The constructor waits until the workers
+  run (they import numpy, OpenCV and eyehil: seconds), so a device serves images from its first exposure.
+  As with any ``spawn`` pool, a script that makes one must guard its entry point
+  (``if __name__ == "__main__":``); the `eyehil` command and pytest do;
 - ``kind="thread"``: a thread pool in this process (OpenCV and numpy's large operations release the lock,
   the rest does not: `python -m bench zmq` compares the kinds).
 
@@ -23,14 +26,16 @@ from __future__ import annotations
 
 import multiprocessing
 from collections.abc import Callable
-from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from eyehil.emulator.device.frames import ExposureRenderer, exposure_rng, render_exposure, render_region
 
 MAX_RENDER_WORKERS = 8
+START_TIMEOUT_S = 120.0  # a process pool waits this long for its workers to import and start (a busy machine)
 KINDS = ("process", "thread")
 _WORKER_RENDERER: ExposureRenderer | None = None  # a worker process's renderer (`_init_worker`)
 
@@ -63,6 +68,18 @@ class Rendered:
     encoded: bytes | None = None
 
 
+def encode_image(image: np.ndarray, fmt: str) -> bytes:
+    """The raw frame of an 8-bit gray image (H, W) in `fmt` (gray, bgr, jpeg)."""
+    if fmt == "bgr":
+        return cv2.cvtColor(image, cv2.COLOR_GRAY2BGR).tobytes()
+    if fmt == "jpeg":
+        ok, data = cv2.imencode(".jpg", image)
+        if not ok:
+            raise ValueError("JPEG encoding failed")
+        return data.tobytes()
+    return np.ascontiguousarray(image).tobytes()
+
+
 def render_job(renderer: ExposureRenderer, job: RenderJob) -> Rendered:
     """Render `job` (any thread or process)."""
     rng = exposure_rng(job.seed, job.frame_id, job.eye)
@@ -72,8 +89,6 @@ def render_job(renderer: ExposureRenderer, job: RenderJob) -> Rendered:
         frame = render_region(renderer, job.rows, job.eye_indices, job.region, rng, leds=job.leds)
     encoded = None
     if job.fmt is not None:
-        from eyehil.emulator.device.pupil.frames import encode_image
-
         encoded = encode_image(frame.image, job.fmt)
     return Rendered(frame.image, tuple(int(v) for v in frame.roi_xy), encoded)
 
@@ -105,8 +120,11 @@ class RenderPool:
         if workers and kind == "process":
             self._executor = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
                                                  initializer=_init_worker, initargs=(renderer,))
-            for _ in range(workers):  # start the workers now, not at the first image
-                self._executor.submit(_ready)
+            warm = [self._executor.submit(_ready) for _ in range(workers)]  # start the workers now
+            done, _ = wait(warm, timeout=START_TIMEOUT_S)
+            if len(done) < workers or not all(f.result() for f in done):
+                self.close()
+                raise RuntimeError(f"the render workers did not start within {START_TIMEOUT_S:.0f} s")
         elif workers:
             self._executor = ThreadPoolExecutor(workers, thread_name_prefix="eyehil-render")
 

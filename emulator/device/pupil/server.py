@@ -35,6 +35,7 @@ from eyehil.emulator.device.pupil.core import DeviceThread
 from eyehil.emulator.device.pupil.datums import PupilTime, eye_windows
 from eyehil.emulator.device.pupil.frames import FramePublisher
 from eyehil.emulator.device.pupil.remote import PupilRemote
+from eyehil.emulator.device.render_pool import KINDS, MAX_RENDER_WORKERS
 from eyehil.emulator.device.subject import Subject
 from eyehil.emulator.render.renderer import DEFAULT_ROI
 from eyehil.protocols.native import MAX_RATE_HZ
@@ -60,12 +61,16 @@ class ServerOptions:
     lsl: bool = False  # also open an LSL outlet of type Gaze (`lsl_outlet`, needs pylsl)
     surface_name: str = "screen"  # the screen's surface topic: surfaces.<name>
     lsl_layout: str = "eyehil"  # or "pupil_relay": Pupil Capture's LSL relay name and channels
+    render_workers: int = 0  # eye images rendered in this many processes or threads (0: on the frame thread)
+    render_kind: str = "process"  # or "thread" (`render_pool`)
 
     def __post_init__(self) -> None:
         if not 1 <= self.rate_hz <= MAX_RATE_HZ:
             raise ValueError(f"rate {self.rate_hz} Hz outside 1..{MAX_RATE_HZ}")
         if self.frame_format not in FRAME_FORMATS or not self.frame_rate_hz >= 0 or self.hwm < 1:
             raise ValueError(f"frame format must be one of {FRAME_FORMATS}, frame rate >= 0 and hwm >= 1")
+        if not 0 <= self.render_workers <= MAX_RENDER_WORKERS or self.render_kind not in KINDS:
+            raise ValueError(f"render workers must be in 0..{MAX_RENDER_WORKERS} and render kind one of {KINDS}")
 
 
 class PupilServer:
@@ -150,7 +155,7 @@ class PupilServer:
         frames = None
         if o.frame_rate_hz > 0:
             frames = FramePublisher(self.context, xsub, ExposureRenderer.for_subject(self.subject), windows,
-                                    seed=o.seed, hwm=o.hwm)
+                                    seed=o.seed, hwm=o.hwm, workers=o.render_workers, kind=o.render_kind)
             self._parts.append(frames)
         if o.lsl:
             import numpy as np
@@ -225,5 +230,6 @@ def server_for(options: DeviceOptions, host: str = "127.0.0.1", port: int = 5002
             load_pylsl()
         except LslUnavailableError as exc:
             raise ValueError(str(exc)) from exc
+    server.setdefault("render_workers", options.render_workers)
     opts = ServerOptions(host=host, port=port, rate_hz=options.rate_hz, seed=options.seed, lsl=lsl, **server)
     return PupilServer(build_subject(options), make_clock(options.clock, options.speed), opts)
