@@ -31,7 +31,7 @@ from __future__ import annotations
 import logging
 from collections import deque
 from collections.abc import Callable
-from concurrent.futures import Future
+from concurrent.futures import Future, wait
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -60,6 +60,7 @@ class FrameOptions:
     budget_bytes: int = 256 * 1024
     workers: int = 0  # render processes (0: render on the device's thread)
     ahead: int = 4  # with workers: exposures in flight at most (rendering, rendered, or chunks waiting)
+    kind: str = "process"  # render workers: "process" or "thread" (`render_pool`)
 
     def __post_init__(self) -> None:
         if not 1 <= self.ahead <= 64 or self.workers < 0 or self.budget_bytes < 1:
@@ -75,7 +76,7 @@ class FrameStream:
         self.renderer, self.tracked, self.options = renderer, tracked, options or FrameOptions()
         self.sent = self.dropped = self.render_failures = 0
         self.on_done: Callable[[], None] | None = None  # called from a pool thread when an image is rendered
-        self._pool = RenderPool(renderer, self.options.workers, on_done=self._done)  # workers start now
+        self._pool = RenderPool(renderer, self.options.workers, self.options.kind, on_done=self._done)  # start now
         self._sel: Selection | None = None
         self._ahead: deque[tuple[int, int, list[tuple[Eye, Future]]]] = deque()  # (frame id, time, images)
         self._queue: deque[tuple[FrameChunk, int, bool]] = deque()  # chunks not yet released: timestamp, last of
@@ -131,6 +132,11 @@ class FrameStream:
         self._ahead.clear()
         self._queued_exposures = 0
         self._sel = None
+
+    def wait_rendered(self, timeout: float | None = None) -> bool:
+        """Wait until every image in flight is rendered (tests, tools); True if they all are."""
+        futures = [f for _, _, images in self._ahead for _, f in images]
+        return not wait(futures, timeout=timeout).not_done
 
     def close(self) -> None:
         """Stop the render workers; idempotent."""
