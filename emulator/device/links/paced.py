@@ -8,10 +8,12 @@ emulator meets the real link's bandwidth, and the device's own backpressure (FEA
 limit, images dropped beyond the frame budget) acts as on the real link: `backlog()` counts the bytes waiting
 in the pacer plus those in the wrapped link.
 
-Pacing is a token bucket (`Pacer`): credit grows at `rate` bytes/s of device time and is capped at `burst`
-bytes (what the real link moves in one `granularity_us`: a USB full-speed frame is 1 ms; default 1 ms), so
-idle time does not let a later burst exceed the real link. Arithmetic is in integer micro-bytes, so the bytes
-admitted by device time t are exact (tests run it on a `ManualClock`). The runner (`LinkRunner`) calls
+Pacing is a token bucket (`Pacer`): credit grows at `rate` bytes/s of device time; while the link idles
+(nothing waits) it is capped at `burst` bytes (what the real link moves in one `granularity_us`: a USB
+full-speed frame is 1 ms; default 1 ms), so idle time does not let a later burst exceed the real link, while
+a busy link is credited all its time (a runner woken late catches up, never beyond the rate). Arithmetic is
+in integer micro-bytes, so the bytes admitted by device time t are exact (tests run it on a `ManualClock`).
+The runner (`LinkRunner`) calls
 `pump()` at each wake-up and sleeps at most `wake_delay_s()`.
 
 Rate text (`parse_link_rate`): a number with a unit, per second (an optional ``/s`` may follow; units ignore
@@ -63,20 +65,25 @@ class Pacer:
         if not MIN_RATE_BPS <= rate_bps <= MAX_RATE_BPS or granularity_us < 1:
             raise ValueError(f"rate {rate_bps} B/s or granularity {granularity_us} us out of range")
         self.rate_bps = int(rate_bps)
-        self.burst = max(1, self.rate_bps * granularity_us // MICRO)  # bytes
+        self.burst = max(1, -(-self.rate_bps * granularity_us // MICRO))  # bytes (rounded up)
         self._credit = 0  # micro-bytes (bytes x 1e6)
         self._t_us = int(start_us)
+        self._idle = True  # the last `admit` gave all that was wanted: the link has idled since
 
     def _accrue(self, now_us: int) -> None:
         dt = max(0, int(now_us) - self._t_us)
         self._t_us = max(self._t_us, int(now_us))
-        self._credit = min(self.burst * MICRO, self._credit + self.rate_bps * dt)
+        self._credit += self.rate_bps * dt
+        if self._idle:  # an idle link stores at most one granule; a busy one transmitted all along
+            self._credit = min(self._credit, self.burst * MICRO)
 
     def admit(self, now_us: int, want: int) -> int:
-        """Bytes (<= `want`) that may be sent at `now_us`; they are taken from the bucket."""
+        """Bytes (<= `want`, the bytes waiting) that may be sent at `now_us`; they are taken from the bucket.
+        Bytes admitted up to time t never exceed rate x (t - start) + burst."""
         self._accrue(now_us)
         n = min(int(want), self._credit // MICRO)
         self._credit -= n * MICRO
+        self._idle = n == want
         return n
 
     def due_us(self, now_us: int, want: int) -> int:
