@@ -13,8 +13,7 @@ Pacing is a token bucket (`Pacer`): credit grows at `rate` bytes/s of device tim
 full-speed frame is 1 ms; default 1 ms), so idle time does not let a later burst exceed the real link, while
 a busy link is credited all its time (a runner woken late catches up, never beyond the rate). Arithmetic is
 in integer micro-bytes, so the bytes admitted by device time t are exact (tests run it on a `ManualClock`).
-The runner (`LinkRunner`) calls
-`pump()` at each wake-up and sleeps at most `wake_delay_s()`.
+The runner (`LinkRunner`) calls `pump()` at each wake-up and sleeps at most `wake_delay_s()`.
 
 Rate text (`parse_link_rate`): a number with a unit, per second (an optional ``/s`` may follow; units ignore
 case, bits only as ``bit``): ``bit``, ``kbit``, ``Mbit``, ``Gbit`` (bits, divided by 8), ``B``, ``kB``, ``MB``,
