@@ -9,6 +9,8 @@ appearance channels (`appearance.AppearanceSolver`), and the image noise comes f
 with `seed`, the frame id and the eye (`frames.exposure_rng`).
 
 URL form (loop://, and `--option` values): ``scene=blignaut2014&eyes=published&eye=3&clock=fast&rate=500``.
+``link_rate=usb-fs`` paces a native link (pty, tcp, usbip) to a real link's byte rate (`links.paced`);
+``render_workers=2`` renders frames in two processes ahead of the link (`render_pool`).
 """
 
 from __future__ import annotations
@@ -23,6 +25,8 @@ from eyehil.emulator.device.clock import make_clock
 from eyehil.emulator.device.frame_stream import FrameOptions
 from eyehil.emulator.device.gaze import Blink, Fixation, Pursuit, Segment
 from eyehil.emulator.device.iscan import IscanTracker
+from eyehil.emulator.device.links.paced import parse_link_rate
+from eyehil.emulator.device.render_pool import MAX_RENDER_WORKERS
 from eyehil.emulator.device.solver import FeatureSolver, tracked_scene
 from eyehil.emulator.device.subject import Behaviour, Subject
 from eyehil.emulator.device.tracker import VirtualTracker
@@ -46,8 +50,14 @@ class DeviceOptions:
     rate_hz: int = 250  # default rate (native) or the fixed rate (ISCAN)
     clock: str = "real"  # or "fast"
     speed: float = 1.0  # real clock: device seconds per wall second
+    link_rate: str = ""  # pace the native link's output, e.g. "12Mbit", "115200baud", "usb-fs" ("": unpaced)
+    render_workers: int = 0  # frames: render in this many processes, ahead of the link (0: on the device's thread)
 
     def __post_init__(self) -> None:
+        if self.link_rate:
+            parse_link_rate(self.link_rate)  # raises ValueError with the accepted forms
+        if not 0 <= self.render_workers <= MAX_RENDER_WORKERS:
+            raise ValueError(f"render_workers must be in 0..{MAX_RENDER_WORKERS}, got {self.render_workers}")
         if self.script not in ("stimulus", "demo"):
             raise ValueError(f"script must be 'stimulus' or 'demo', got {self.script!r}")
         if self.sides not in ("", "right", "left", "both"):
@@ -100,7 +110,17 @@ def build_device(options: DeviceOptions | None = None) -> VirtualTracker | Iscan
     subject = build_subject(options, appearance=options.mode == "native")
     if options.mode == "iscan":
         return IscanTracker(subject, clock, rate_hz=options.rate_hz)
-    return VirtualTracker(subject, clock, default_rate_hz=options.rate_hz, frames=FrameOptions(seed=options.seed))
+    return VirtualTracker(subject, clock, default_rate_hz=options.rate_hz,
+                          frames=FrameOptions(seed=options.seed, workers=options.render_workers))
+
+
+def paced(link, options: DeviceOptions, clock):
+    """`link` paced to `options.link_rate` on the device's `clock` (`links.paced.PacedLink`), or `link` itself."""
+    if not options.link_rate:
+        return link
+    from eyehil.emulator.device.links.paced import PacedLink
+
+    return PacedLink(link, parse_link_rate(options.link_rate), clock)
 
 
 _HEAD_KEYS = ("x", "y", "z", "yaw", "pitch", "roll")

@@ -3,6 +3,7 @@
     eyehil emulate --link pty                       # prints the pseudo-terminal's path; open it as a serial port
     eyehil emulate --link tcp --port 5555           # pyserial socket://127.0.0.1:5555
     eyehil emulate --link pty --mode iscan --rate 120
+    eyehil emulate --link pty --link-rate usb-fs    # output paced to a full-speed USB CDC device (1.2 MB/s)
     eyehil emulate --link zmq [--port 50020] [--lsl]   # Pupil Core Network API (+ an LSL outlet), docs/zmq.md
     eyehil emulate --link opengaze [--port 4242] [--gaze-method guestrin]   # Gazepoint Open Gaze API, docs/opengaze.md
     eyehil emulate --scene blignaut2014 --write-geometry blignaut.toml   # the host's setup file
@@ -19,7 +20,7 @@ import importlib
 import signal
 import threading
 
-from eyehil.emulator.device.build import DeviceOptions, build_device, options_from_query
+from eyehil.emulator.device.build import DeviceOptions, build_device, options_from_query, paced
 from eyehil.emulator.device.links.base import LinkRunner
 from eyehil.emulator.scene import preset_names
 
@@ -48,6 +49,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rate", type=int, help="default sample rate, Hz (ISCAN: the rate; default 250, opengaze 60)")
     p.add_argument("--clock", choices=["real", "fast"], default="real", help="real time or as fast as possible")
     p.add_argument("--speed", type=float, default=1.0, help="real clock: device seconds per wall second")
+    p.add_argument("--link-rate", default="", metavar="RATE",
+                   help="pace pty/tcp/usbip output to a real link: 12Mbit, 1MB, 115200baud, usb-fs, usb-hs "
+                        "(docs/frames.md; default unpaced)")
+    p.add_argument("--render-workers", type=int, default=0, metavar="N",
+                   help="frames: render in N processes ahead of the link (default 0: on the device's thread)")
     p.add_argument("--behaviour", default="", help="e.g. 'latency=0.2,jitter=0.05,blinks=0.3' (s, deg, Hz)")
     p.add_argument("--write-geometry", metavar="FILE", help="write the host's tracker geometry (TOML) for the scene")
     p.add_argument("--lsl", action="store_true", help="zmq: also open an LSL outlet of type Gaze (needs pylsl)")
@@ -69,7 +75,8 @@ def options(args: argparse.Namespace) -> DeviceOptions:
     base = DeviceOptions(scene=args.scene, eyes=args.eyes, eye=args.eye, sides=args.sides or "", seed=args.seed,
                          script=args.script,
                          mode=args.mode, rate_hz=args.rate or (60 if args.link == "opengaze" else 250),
-                         clock=args.clock, speed=args.speed)
+                         clock=args.clock, speed=args.speed, link_rate=args.link_rate,
+                         render_workers=args.render_workers)
     query = "&".join(part for part in (args.head, args.behaviour) if part).replace(",", "&")
     return options_from_query(query, base)
 
@@ -88,6 +95,8 @@ def make_link(kind: str, host: str, port: int):
 
 def make_runner(opts: DeviceOptions, args: argparse.Namespace):
     """A `LinkRunner` on the chosen link or, for ``--link zmq``, the Pupil Core facade (imported only then)."""
+    if opts.link_rate and args.link in ("zmq", "opengaze"):
+        raise ValueError("--link-rate paces the native links (pty, tcp, usbip)")
     if args.link == "zmq":
         from eyehil.emulator.device.pupil.server import server_for
 
@@ -101,7 +110,12 @@ def make_runner(opts: DeviceOptions, args: argparse.Namespace):
         return opengaze_server(opts, args.host, args.port or 4242, method=args.gaze_method)
     if args.lsl:
         raise ValueError("--lsl needs --link zmq")
-    return LinkRunner(build_device(opts), make_link(args.link, args.host, args.port))
+    core = build_device(opts)
+    try:
+        return LinkRunner(core, paced(make_link(args.link, args.host, args.port), opts, core.clock))
+    except BaseException:
+        core.close()
+        raise
 
 
 class ViewBlink:

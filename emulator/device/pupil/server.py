@@ -37,6 +37,7 @@ from eyehil.emulator.device.pupil.datums import PupilTime, eye_windows
 from eyehil.emulator.device.pupil.frames import FramePublisher
 from eyehil.emulator.device.pupil.remote import PupilRemote
 from eyehil.emulator.device.pupil.world import MAX_WIDTH_PX, MIN_WIDTH_PX, WORLD_WIDTH_PX, WorldPublisher, WorldView
+from eyehil.emulator.device.render_pool import KINDS, MAX_RENDER_WORKERS
 from eyehil.emulator.device.subject import Subject
 from eyehil.emulator.render.renderer import DEFAULT_ROI
 from eyehil.protocols.native import MAX_RATE_HZ
@@ -65,6 +66,8 @@ class ServerOptions:
     lsl_layout: str = "eyehil"  # or "pupil_relay": Pupil Capture's LSL relay name and channels
     world_rate_hz: float = 30.0  # frame.world images per second (0: none)
     world_width_px: int = WORLD_WIDTH_PX  # frame.world width; the height follows the screen's aspect ratio
+    render_workers: int = 0  # eye images rendered in this many processes or threads (0: on the frame thread)
+    render_kind: str = "process"  # or "thread" (`render_pool`)
 
     def __post_init__(self) -> None:
         if not 1 <= self.rate_hz <= MAX_RATE_HZ:
@@ -75,6 +78,8 @@ class ServerOptions:
             raise ValueError("record_max_bytes must be >= 0")
         if not self.world_rate_hz >= 0 or not MIN_WIDTH_PX <= self.world_width_px <= MAX_WIDTH_PX:
             raise ValueError(f"world rate must be >= 0 and world width {MIN_WIDTH_PX}..{MAX_WIDTH_PX} px")
+        if not 0 <= self.render_workers <= MAX_RENDER_WORKERS or self.render_kind not in KINDS:
+            raise ValueError(f"render workers must be in 0..{MAX_RENDER_WORKERS} and render kind one of {KINDS}")
 
 
 class PupilServer:
@@ -159,7 +164,7 @@ class PupilServer:
         frames = None
         if o.frame_rate_hz > 0:
             frames = FramePublisher(self.context, xsub, ExposureRenderer.for_subject(self.subject), windows,
-                                    seed=o.seed, hwm=o.hwm)
+                                    seed=o.seed, hwm=o.hwm, workers=o.render_workers, kind=o.render_kind)
             self._parts.append(frames)
         world = None
         if o.world_rate_hz > 0:
@@ -245,5 +250,6 @@ def server_for(options: DeviceOptions, host: str = "127.0.0.1", port: int = 5002
             load_pylsl()
         except LslUnavailableError as exc:
             raise ValueError(str(exc)) from exc
+    server.setdefault("render_workers", options.render_workers)
     opts = ServerOptions(host=host, port=port, rate_hz=options.rate_hz, seed=options.seed, lsl=lsl, **server)
     return PupilServer(build_subject(options), make_clock(options.clock, options.speed), opts)
