@@ -3,35 +3,39 @@
 `ProcessSolves` is the `solver.SolveBackend` of a device on the real clock. A solve (`FeatureSolver.solve`, one
 forward-model call, 10-300 ms of pure Python and numpy) run on a thread of the device's process holds the GIL
 most of that time, and the device's streaming thread waits for it between samples: STIMULUS ACKs measured
-p99 299 ms while solves ran (issue 11). Here the solve runs in one worker process ("eyehil-solver", the
-multiprocessing "spawn" context: a fresh interpreter, no copy of the device's threads or locks), and the
+p99 299 ms while solves ran (issue 11). Here the solve runs in one worker process (`python -m
+eyehil.emulator.device.solve_process`: a fresh interpreter, no copy of the device's threads or locks), and the
 calling thread only waits on a pipe, without the GIL.
 
-- The solver (anatomy, scene, head pose, settings: a few kB; `FeatureSolver.__getstate__`, without its cache
-  or grid) is pickled once, when the process starts; a request is then just the points (N, 2) screen mm and
-  the reply the features (N, E, C).
+- The worker is a plain subprocess talking `multiprocessing.connection` messages over its stdin and stdout
+  (rather than a multiprocessing "spawn" process, which would also start multiprocessing's resource tracker
+  process for the device's lifetime and re-import the device's main script). The worker gets the device's
+  `sys.path` (as PYTHONPATH: it imports what the device imports), and the pickled solver (anatomy, scene, head
+  pose, settings: a few kB; `FeatureSolver.__getstate__`, without its cache or grid) once, when it starts;
+  a request is then just the points (N, 2) screen mm, the reply ("ok", features (N, E, C)) or ("error",
+  the worker's traceback).
 - One request at a time: `solve` is called by `SolveQueue`'s single worker thread, which already coalesces
   the requests, so the pipe never holds more than one request and the stop message.
-- The process starts on the first `solve` (on the calling thread, never the device's); if it dies (killed,
+- The worker starts on the first `solve` (on the calling thread, never the device's); if it dies (killed,
   out of memory), the next `solve` starts a new one, `MAX_STARTS` times in all, then every solve fails (the
   subject interpolates, as it does for any failed solve). An exception inside the worker's solve comes back as
   `SolveProcessError` with the worker's traceback; the worker goes on.
 - No orphans: `close` sends a stop, waits `STOP_GRACE_S`, then terminates (and kills) the worker. The worker
-  ignores SIGINT (a terminal's Ctrl-C reaches the whole process group: the device stops it, cleanly), is a
-  daemon process (multiprocessing terminates it when the device's interpreter exits), and exits by itself
-  when its pipe closes or its parent changes (the device killed with SIGKILL), checked every
-  `PARENT_CHECK_S`.
+  runs in its own session, so a terminal's Ctrl-C (SIGINT to the foreground process group) reaches only the
+  device, which closes it; and it exits by itself when its pipe closes or its parent changes (the device
+  killed with SIGKILL), checked every `PARENT_CHECK_S`.
 """
 
 from __future__ import annotations
 
 import contextlib
-import multiprocessing
 import os
-import signal
+import pickle
+import subprocess
+import sys
 import threading
 import traceback
-from multiprocessing.connection import Connection, wait
+from multiprocessing.connection import Connection
 
 import numpy as np
 
@@ -52,12 +56,12 @@ class ProcessSolves:
     Counters: ``starts`` (worker processes started), ``requests`` (solves sent to the worker).
     """
 
-    def __init__(self, solver: FeatureSolver, *, context: str = "spawn") -> None:
+    def __init__(self, solver: FeatureSolver) -> None:
         """Nothing starts yet: the worker process starts on the first `solve`."""
         self.solver = solver
-        self._context = multiprocessing.get_context(context)
-        self._process: multiprocessing.process.BaseProcess | None = None
-        self._conn: Connection | None = None
+        self._popen: subprocess.Popen | None = None
+        self._to: Connection | None = None  # requests, to the worker's stdin
+        self._from: Connection | None = None  # replies, from the worker's stdout
         self._solve_lock = threading.Lock()  # one request in flight
         self._send_lock = threading.Lock()  # `close` may send the stop while a solve waits for its reply
         self._closed = False
@@ -66,98 +70,100 @@ class ProcessSolves:
     @property
     def pid(self) -> int | None:
         """The worker's process id while it runs, else None."""
-        process = self._process
-        return process.pid if process is not None and process.is_alive() else None
+        popen = self._popen
+        return popen.pid if popen is not None and popen.poll() is None else None
 
     def solve(self, xy: np.ndarray) -> np.ndarray:
         """Exact features (N, E, C) of points (N, 2) screen mm, computed by the worker; blocks (without the GIL)
         until it answers. Raises `SolveProcessError` if the worker's solve raised or the worker is gone."""
         with self._solve_lock:
-            conn, process = self._ensure_started()
+            to, back, popen = self._ensure_started()
             try:
                 with self._send_lock:
-                    conn.send(np.ascontiguousarray(xy, dtype=float).reshape(-1, 2))
+                    to.send(np.ascontiguousarray(xy, dtype=float).reshape(-1, 2))
                 self.requests += 1
-                wait([conn, process.sentinel])
-                if not conn.poll():  # the worker died without an answer
-                    raise SolveProcessError(f"solver process {process.pid} exited ({process.exitcode})")
-                kind, value = conn.recv()
+                kind, value = back.recv()
             except (EOFError, OSError) as exc:
-                raise SolveProcessError(f"solver process {process.pid} is gone: {exc!r}") from exc
+                raise SolveProcessError(f"solver process {popen.pid} is gone: {exc!r}") from exc
         if kind != "ok":
             raise SolveProcessError(value)
         return value
 
-    def _ensure_started(self) -> tuple[Connection, multiprocessing.process.BaseProcess]:
-        """The running worker and its pipe; starts one if there is none (called with `_solve_lock` held)."""
+    def _ensure_started(self) -> tuple[Connection, Connection, subprocess.Popen]:
+        """The running worker and its pipes; starts one if there is none (called with `_solve_lock` held)."""
         if self._closed:
             raise SolveProcessError("solver process closed")
-        if self._process is not None and self._process.is_alive() and self._conn is not None:
-            return self._conn, self._process
+        if self._popen is not None and self._popen.poll() is None:
+            return self._to, self._from, self._popen
         self._reap()
         if self.starts >= MAX_STARTS:
             raise SolveProcessError(f"solver process failed {self.starts} times; not restarted")
-        here, there = self._context.Pipe(duplex=True)
-        process = self._context.Process(target=serve, args=(there, self.solver, os.getpid()),
-                                        name="eyehil-solver", daemon=True)
-        # Started with SIGINT blocked, so that a Ctrl-C while the worker still imports cannot reach it (a new
-        # process inherits the mask; `serve` ignores SIGINT, then unblocks it). Only this thread's mask changes.
-        old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        request_r, request_w = os.pipe()
+        reply_r, reply_w = os.pipe()
         try:
-            process.start()
+            env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+            popen = subprocess.Popen([sys.executable, "-m", __name__, str(os.getpid())], stdin=request_r,
+                                     stdout=reply_w, env=env, start_new_session=True)
         finally:
-            signal.pthread_sigmask(signal.SIG_SETMASK, old)
-        there.close()
+            os.close(request_r)
+            os.close(reply_w)
+        to, back = Connection(request_w, readable=False), Connection(reply_r, writable=False)
         self.starts += 1
         with self._send_lock:
-            self._process, self._conn = process, here
+            self._popen, self._to, self._from = popen, to, back
+            with contextlib.suppress(OSError):  # if the worker died at once, the request below finds out
+                to.send_bytes(pickle.dumps(self.solver))  # the only time the solver crosses
         if self._closed:  # closed while starting: `close` did not see this process
-            self._stop(process, here)
+            self._stop(popen)
             raise SolveProcessError("solver process closed")
-        return here, process
+        return to, back, popen
 
     def _reap(self) -> None:
-        """Forget a worker that died (collect its exit status, close its pipe)."""
-        if self._process is not None:
-            self._process.join(0)
-        if self._conn is not None:
-            self._conn.close()
-        self._process = self._conn = None
+        """Forget a worker that is gone (collect its exit status, close its pipes)."""
+        if self._popen is not None:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                self._popen.wait(0)
+        for conn in (self._to, self._from):
+            if conn is not None:
+                conn.close()
+        self._popen = self._to = self._from = None
 
     def close(self) -> None:
         """Stop the worker: a stop message, `STOP_GRACE_S` to obey, then terminate and kill; idempotent."""
         with self._send_lock:
             self._closed = True
-            process, conn = self._process, self._conn
-        if process is not None and conn is not None:
-            self._stop(process, conn)
+            popen = self._popen
+        if popen is not None:
+            self._stop(popen)
         with self._solve_lock:  # a solve that waited on the worker has returned (its process is dead)
             self._reap()
 
-    def _stop(self, process: multiprocessing.process.BaseProcess, conn: Connection) -> None:
-        with self._send_lock, contextlib.suppress(OSError, ValueError):
-            conn.send(None)
-        process.join(STOP_GRACE_S)
-        if process.is_alive():
-            process.terminate()
-            process.join(STOP_GRACE_S)
-        if process.is_alive():
-            process.kill()
-            process.join()
+    def _stop(self, popen: subprocess.Popen) -> None:
+        with self._send_lock, contextlib.suppress(OSError, ValueError, AttributeError):
+            self._to.send(None)
+        for finish in (None, popen.terminate, popen.kill):
+            if finish is not None:
+                finish()
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                popen.wait(STOP_GRACE_S)
+                return
+        popen.wait()
 
 
-def serve(conn: Connection, solver: FeatureSolver, parent_pid: int) -> None:
-    """The worker process: answer each request (points (N, 2)) with ("ok", features) or ("error", traceback)
-    until a None request, a closed pipe or a new parent."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is for the device, which stops us
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+def serve(requests: Connection, replies: Connection, parent_pid: int) -> None:
+    """The worker: read the solver, then answer each request (points (N, 2)) with ("ok", features) or ("error",
+    traceback) until a None request, a closed pipe or a new parent."""
+    try:
+        solver = pickle.loads(requests.recv_bytes())
+    except (EOFError, OSError):
+        return
     while True:
         try:
-            if not conn.poll(PARENT_CHECK_S):
+            if not requests.poll(PARENT_CHECK_S):
                 if os.getppid() != parent_pid:
                     return  # the device died without closing us
                 continue
-            request = conn.recv()
+            request = requests.recv()
         except (EOFError, OSError):
             return
         if request is None:
@@ -167,6 +173,20 @@ def serve(conn: Connection, solver: FeatureSolver, parent_pid: int) -> None:
         except Exception:  # reported to the device, which logs it; the next request may well succeed
             reply = ("error", traceback.format_exc())
         try:
-            conn.send(reply)
+            replies.send(reply)
         except OSError:
             return
+
+
+def main() -> None:
+    """`python -m eyehil.emulator.device.solve_process PARENT_PID`, started by `ProcessSolves`: requests on
+    stdin, replies on stdout (anything else printed goes to stderr)."""
+    requests = Connection(os.dup(0), writable=False)
+    replies = Connection(os.dup(1), readable=False)
+    os.dup2(2, 1)  # a stray print must not corrupt the replies
+    sys.stdout = sys.stderr
+    serve(requests, replies, int(sys.argv[1]))
+
+
+if __name__ == "__main__":
+    main()
