@@ -14,6 +14,9 @@ calling thread only waits on a pipe, without the GIL.
   pose, settings: a few kB; `FeatureSolver.__getstate__`, without its cache or grid) once, when it starts;
   a request is then just the points (N, 2) screen mm, the reply ("ok", features (N, E, C)) or ("error",
   the worker's traceback).
+- The worker lowers its own priority (`NICE`): on a machine with fewer free cores than runnable processes it
+  would otherwise take its CPU share from the device's streaming thread, as the thread did with the GIL; the
+  exact solve then takes longer, and the subject interpolates meanwhile.
 - One request at a time: `solve` is called by `SolveQueue`'s single worker thread, which already coalesces
   the requests, so the pipe never holds more than one request and the stop message.
 - The worker starts on the first `solve` (on the calling thread, never the device's); if it dies (killed,
@@ -44,6 +47,7 @@ from eyehil.emulator.device.solver import FeatureSolver
 MAX_STARTS = 3  # worker processes started in the life of one backend (the first and two replacements)
 STOP_GRACE_S = 1.0  # how long `close` lets the worker finish before terminating it
 PARENT_CHECK_S = 1.0  # how often an idle worker checks that its device is still there
+NICE = 10  # the worker's niceness increment: on a busy machine its CPU goes to the streaming device first
 
 
 class SolveProcessError(RuntimeError):
@@ -185,6 +189,8 @@ def main() -> None:
     replies = Connection(os.dup(1), readable=False)
     os.dup2(2, 1)  # a stray print must not corrupt the replies
     sys.stdout = sys.stderr
+    with contextlib.suppress(OSError):
+        os.nice(NICE)
     serve(requests, replies, int(sys.argv[1]))
 
 
