@@ -177,7 +177,8 @@ def report(results: dict) -> str:
     lat, s = results["latency"], results["soak"]
     growth = [100.0 * (end - first) / first for first, end in (s["rss_a_kib"], s["rss_b_kib"])]
     return (f"soak stimulus: {lat['stimuli']} STIMULUS while streaming 1 kHz on a pty: ACK p50 {lat['p50_ms']:.2f} ms, "
-            f"p99 {lat['p99_ms']:.2f} ms, max {lat['max_ms']:.2f} ms, {lat['retries']} retries, {lat['unanswered']} unanswered\n"
+            f"p99 {lat['p99_ms']:.2f} ms, max {lat['max_ms']:.2f} ms, {lat['retries']} retries, "
+            f"{lat['unanswered']} unanswered\n"
             f"soak {s['seconds']:.0f} s: pty A 1 kHz features + hostile input ({s['hostile_bps']:.0f} B/s): "
             f"{s['samples_a']:,} samples, {s['lost_a']} lost, {s['skipped_a']} skipped; pty B 100 Hz features+frames: "
             f"{s['samples_b']:,} samples, {s['images_b']:,} images, {s['lost_b']} lost, {s['skipped_b']} skipped; "

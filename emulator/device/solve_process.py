@@ -14,9 +14,10 @@ calling thread only waits on a pipe, without the GIL.
   pose, settings: a few kB; `FeatureSolver.__getstate__`, without its cache or grid) once, when it starts;
   a request is then just the points (N, 2) screen mm, the reply ("ok", features (N, E, C)) or ("error",
   the worker's traceback).
-- The worker lowers its own priority (`NICE`): on a machine with fewer free cores than runnable processes it
-  would otherwise take its CPU share from the device's streaming thread, as the thread did with the GIL; the
-  exact solve then takes longer, and the subject interpolates meanwhile.
+- The worker is one thread (`ONE_THREAD`: no BLAS thread pool, whose threads would keep the default
+  priority) and lowers its own priority (`NICE`): on a machine with fewer free cores than runnable processes
+  it would otherwise take its CPU share from the device's streaming thread, as the thread did with the GIL;
+  the exact solve then takes longer, and the subject interpolates meanwhile.
 - One request at a time: `solve` is called by `SolveQueue`'s single worker thread, which already coalesces
   the requests, so the pipe never holds more than one request and the stop message.
 - The worker starts on the first `solve` (on the calling thread, never the device's); if it dies (killed,
@@ -48,6 +49,7 @@ MAX_STARTS = 3  # worker processes started in the life of one backend (the first
 STOP_GRACE_S = 1.0  # how long `close` lets the worker finish before terminating it
 PARENT_CHECK_S = 1.0  # how often an idle worker checks that its device is still there
 NICE = 10  # the worker's niceness increment: on a busy machine its CPU goes to the streaming device first
+ONE_THREAD = {name: "1" for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")}
 
 
 class SolveProcessError(RuntimeError):
@@ -105,7 +107,7 @@ class ProcessSolves:
         request_r, request_w = os.pipe()
         reply_r, reply_w = os.pipe()
         try:
-            env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+            env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p), **ONE_THREAD)
             popen = subprocess.Popen([sys.executable, "-m", __name__, str(os.getpid())], stdin=request_r,
                                      stdout=reply_w, env=env, start_new_session=True)
         finally:

@@ -86,6 +86,7 @@ def test_worker_solves_exactly_as_the_solver_and_gets_it_once(monkeypatch) -> No
         assert len(pids) == 1 and None not in pids and backend.starts == 1 and backend.requests == 3
         mine, worker = os.getpriority(os.PRIO_PROCESS, 0), os.getpriority(os.PRIO_PROCESS, backend.pid)
         assert worker == min(19, mine + solve_process.NICE)  # it yields the CPU to the device
+        assert len(os.listdir(f"/proc/{backend.pid}/task")) == 1  # no thread pool keeping the default priority
         assert len(pickled) == 1  # the solver went to the worker once, with the process; requests are points
         monkeypatch.setattr(FeatureSolver, "__getstate__", original)
         for xy, answer in zip(points, answers, strict=True):
