@@ -3,8 +3,8 @@
 `ProcessSolves` is the `solver.SolveBackend` of a device on the real clock. A solve (`FeatureSolver.solve`, one
 forward-model call, 10-300 ms of pure Python and numpy) run on a thread of the device's process holds the GIL
 most of that time, and the device's streaming thread waits for it between samples: STIMULUS ACKs measured
-p99 299 ms while solves ran (issue 11). Here the solve runs in one worker process (`python -m
-eyehil.emulator.device.solve_process`: a fresh interpreter, no copy of the device's threads or locks), and the
+p99 299 ms while solves ran (issue 11). Here the solve runs in one worker process (`python -c BOOT`, which
+calls `main` here: a fresh interpreter, no copy of the device's threads or locks), and the
 calling thread only waits on a pipe, without the GIL.
 
 - The worker is a plain subprocess talking `multiprocessing.connection` messages over its stdin and stdout
@@ -50,6 +50,8 @@ STOP_GRACE_S = 1.0  # how long `close` lets the worker finish before terminating
 PARENT_CHECK_S = 1.0  # how often an idle worker checks that its device is still there
 NICE = 10  # the worker's niceness increment: on a busy machine its CPU goes to the streaming device first
 ONE_THREAD = {name: "1" for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")}
+# The worker lowers its priority before it imports anything heavy (its start-up is a second of CPU, too).
+BOOT = f"import os; os.nice({NICE}); from {__name__} import main; main()"
 
 
 class SolveProcessError(RuntimeError):
@@ -108,7 +110,7 @@ class ProcessSolves:
         reply_r, reply_w = os.pipe()
         try:
             env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p), **ONE_THREAD)
-            popen = subprocess.Popen([sys.executable, "-m", __name__, str(os.getpid())], stdin=request_r,
+            popen = subprocess.Popen([sys.executable, "-c", BOOT, str(os.getpid())], stdin=request_r,
                                      stdout=reply_w, env=env, start_new_session=True)
         finally:
             os.close(request_r)
@@ -185,16 +187,10 @@ def serve(requests: Connection, replies: Connection, parent_pid: int) -> None:
 
 
 def main() -> None:
-    """`python -m eyehil.emulator.device.solve_process PARENT_PID`, started by `ProcessSolves`: requests on
-    stdin, replies on stdout (anything else printed goes to stderr)."""
+    """The worker's entry (`BOOT`, argument PARENT_PID), started by `ProcessSolves`: requests on stdin, replies
+    on stdout (anything else printed goes to stderr)."""
     requests = Connection(os.dup(0), writable=False)
     replies = Connection(os.dup(1), readable=False)
     os.dup2(2, 1)  # a stray print must not corrupt the replies
     sys.stdout = sys.stderr
-    with contextlib.suppress(OSError):
-        os.nice(NICE)
     serve(requests, replies, int(sys.argv[1]))
-
-
-if __name__ == "__main__":
-    main()

@@ -59,7 +59,7 @@ def _solve_workers(parent: int) -> list[int]:
                 cmdline = (entry / "cmdline").read_bytes()
             except OSError:
                 continue
-            if int(stat[1]) == parent and stat[0] != "Z" and b"eyehil.emulator.device.solve_process" in cmdline:
+            if int(stat[1]) == parent and stat[0] != "Z" and solve_process.BOOT.encode() in cmdline:
                 found.append(int(entry.name))
     return found
 
