@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from eyehil.drivers.client import open_tracker
+from eyehil.drivers.errors import TrackerTimeoutError
 from eyehil.protocols.enums import StreamSelect
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -41,7 +42,8 @@ import sys, time
 from eyehil.emulator.device.build import DeviceOptions, build_device
 from eyehil.emulator.device.links.base import LinkRunner
 from eyehil.emulator.device.links.pty import PtyLink
-with LinkRunner(build_device(DeviceOptions(rate_hz=int(sys.argv[1]), clock="real")), PtyLink()) as runner:
+options = DeviceOptions(rate_hz=int(sys.argv[1]), clock="real", solves=sys.argv[2])
+with LinkRunner(build_device(options), PtyLink()) as runner:
     print(runner.url, flush=True)
     sys.stdin.read()  # until the parent closes our stdin
 """
@@ -117,9 +119,9 @@ while True:
 """
 
 
-def _device(rate_hz: int) -> tuple[subprocess.Popen, str]:
+def _device(rate_hz: int, solves: str = "auto") -> tuple[subprocess.Popen, str]:
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.Popen([sys.executable, "-c", DEVICE, str(rate_hz)], stdin=subprocess.PIPE,
+    proc = subprocess.Popen([sys.executable, "-c", DEVICE, str(rate_hz), solves], stdin=subprocess.PIPE,
                             stdout=subprocess.PIPE, text=True, env=env, cwd=ROOT)
     return proc, proc.stdout.readline().strip()
 
@@ -131,9 +133,13 @@ def _resources(pid: int) -> tuple[int, int]:
     return rss, len(os.listdir(f"/proc/{pid}/fd"))
 
 
-def stimulus_latency(count: int) -> dict:
-    """Round trips (ms) of `count` STIMULUS commands at new positions while streaming 1 kHz over a pty."""
-    proc, url = _device(1000)
+def stimulus_latency(count: int, new_positions: bool = True, solves: str = "auto") -> dict:
+    """Round trips (ms) of `count` STIMULUS commands while streaming 1 kHz over a pty, each at a new position
+    (each starts a fixation solve) or, without `new_positions`, all at one position (no solve: the control);
+    `solves`: the device's `DeviceOptions.solves`. A STIMULUS the host gave up on (TrackerTimeoutError after its
+    retries) counts as `unanswered`, its round trip as the time the host spent on it."""
+    proc, url = _device(1000, solves)
+    unanswered = 0
     try:
         with open_tracker(url, timeout=10.0) as tracker:
             tracker.configure(rate_hz=1000)
@@ -143,7 +149,12 @@ def stimulus_latency(count: int) -> dict:
             for i in range(count):
                 tracker.drain(max_s=0.05)
                 t0 = time.perf_counter()
-                tracker.stimulus(i, rng.uniform(20, 350), rng.uniform(20, 280))
+                if new_positions or i == 0:
+                    x, y = rng.uniform(20, 350), rng.uniform(20, 280)
+                try:
+                    tracker.stimulus(i, x, y)
+                except TrackerTimeoutError:
+                    unanswered += 1
                 trips.append((time.perf_counter() - t0) * 1e3)
                 for _ in tracker.samples(count=20):  # keep streaming between stimuli
                     pass
@@ -154,7 +165,7 @@ def stimulus_latency(count: int) -> dict:
         proc.wait(30)
     trips = np.array(trips)
     return {"stimuli": count, "p50_ms": float(np.percentile(trips, 50)), "p99_ms": float(np.percentile(trips, 99)),
-            "max_ms": float(trips.max()), "retries": stats.retries}
+            "max_ms": float(trips.max()), "retries": stats.retries, "unanswered": unanswered}
 
 
 def soak(seconds: float, hostile_bps: float) -> dict:
@@ -272,7 +283,8 @@ def report(results: dict) -> str:
     z_growth = 100.0 * (z["rss_kib"][1] - z["rss_kib"][0]) / z["rss_kib"][0]
     growth = [100.0 * (end - first) / first for first, end in (s["rss_a_kib"], s["rss_b_kib"])]
     return (f"soak stimulus: {lat['stimuli']} STIMULUS while streaming 1 kHz on a pty: ACK p50 {lat['p50_ms']:.2f} ms, "
-            f"p99 {lat['p99_ms']:.2f} ms, max {lat['max_ms']:.2f} ms, {lat['retries']} retries\n"
+            f"p99 {lat['p99_ms']:.2f} ms, max {lat['max_ms']:.2f} ms, {lat['retries']} retries, "
+            f"{lat['unanswered']} unanswered\n"
             f"soak {s['seconds']:.0f} s: pty A 1 kHz features + hostile input ({s['hostile_bps']:.0f} B/s): "
             f"{s['samples_a']:,} samples, {s['lost_a']} lost, {s['skipped_a']} skipped; pty B 100 Hz features+frames: "
             f"{s['samples_b']:,} samples, {s['images_b']:,} images, {s['lost_b']} lost, {s['skipped_b']} skipped; "

@@ -4,7 +4,8 @@
   (`feed`), bytes out (`poll`, `read_available`), no I/O, no threads;
 - `subject.Subject`, `gaze` (scripts: fixations, saccades, pursuits, blinks), `solver` (exact and
   interpolated features from `eyehil.emulator.forward`; `SolveQueue`: coalesced solves off the
-  device thread), `appearance` (the outlines a renderer needs), `camera`
+  device thread), `solve_process` (those solves in a worker process, off the device's GIL), `appearance`
+  (the outlines a renderer needs), `camera`
   (exposures, detection flags), `clock`; `frames` and `frame_stream` (rendered images as FRAME_CHUNKs),
   `render_pool` (images rendered off the device's thread: worker processes or threads);
 - `stimulus`: the STIMULUS side channel, the emulator's stand-in for the screen (one coordinate conversion);

@@ -27,7 +27,8 @@ from eyehil.emulator.device.gaze import Blink, Fixation, Pursuit, Segment
 from eyehil.emulator.device.iscan import IscanTracker
 from eyehil.emulator.device.links.paced import parse_link_rate
 from eyehil.emulator.device.render_pool import MAX_RENDER_WORKERS
-from eyehil.emulator.device.solver import FeatureSolver, tracked_scene
+from eyehil.emulator.device.solve_process import ProcessSolves
+from eyehil.emulator.device.solver import FeatureSolver, InThreadSolves, tracked_scene
 from eyehil.emulator.device.subject import Behaviour, Subject
 from eyehil.emulator.device.tracker import VirtualTracker
 from eyehil.emulator.eye.select import eyes_from_spec
@@ -52,6 +53,7 @@ class DeviceOptions:
     speed: float = 1.0  # real clock: device seconds per wall second
     link_rate: str = ""  # pace the native link's output, e.g. "12Mbit", "115200baud", "usb-fs" ("": unpaced)
     render_workers: int = 0  # frames: render in this many processes, ahead of the link (0: on the device's thread)
+    solves: str = "auto"  # where fixation solves run: "process", "thread"; auto: process on the real clock
 
     def __post_init__(self) -> None:
         if self.link_rate:
@@ -64,6 +66,8 @@ class DeviceOptions:
             raise ValueError(f"sides must be 'right', 'left' or 'both', got {self.sides!r}")
         if self.mode not in ("native", "iscan"):
             raise ValueError(f"mode must be 'native' or 'iscan', got {self.mode!r}")
+        if self.solves not in ("auto", "process", "thread"):
+            raise ValueError(f"solves must be 'auto', 'process' or 'thread', got {self.solves!r}")
 
 
 def demo_script(scene: Scene) -> list[Segment]:
@@ -89,7 +93,10 @@ def build_subject(options: DeviceOptions, appearance: bool = True) -> Subject:
     """The simulated subject of `options`; with `appearance`, its observations also carry what frames are drawn
     from (`appearance.AppearanceSolver`). On the real clock the subject never waits for a solve (fixations of new
     targets are interpolated until solved); on the fast clock, whose time is virtual, it waits for the exact one
-    (at most `FAST_CLOCK_SOLVE_WAIT_S`)."""
+    (at most `FAST_CLOCK_SOLVE_WAIT_S`). The solves of new targets run in a worker process on the real clock (they
+    would otherwise hold the GIL the streaming thread needs: `solve_process`) and on a thread of this process on
+    the fast clock, whose device waits for them anyway (a process would only add its start-up); `options.solves`
+    overrides."""
     scene = load_scene(options.scene)
     if options.sides:
         scene = tracked_scene(scene, ("right", "left") if options.sides == "both" else (options.sides,))
@@ -99,8 +106,9 @@ def build_subject(options: DeviceOptions, appearance: bool = True) -> Subject:
     solver = (AppearanceSolver if appearance else FeatureSolver)(eyes[options.eye], scene, options.head)
     script = demo_script(scene) if options.script == "demo" else None
     wait_s = FAST_CLOCK_SOLVE_WAIT_S if options.clock == "fast" else 0.0
+    where = options.solves if options.solves != "auto" else "thread" if options.clock == "fast" else "process"
     return Subject(solver, options.behaviour, rng=np.random.default_rng(options.seed), script=script,
-                   exact_wait_s=wait_s)
+                   exact_wait_s=wait_s, solves=ProcessSolves if where == "process" else InThreadSolves)
 
 
 def build_device(options: DeviceOptions | None = None) -> VirtualTracker | IscanTracker:
