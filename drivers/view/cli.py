@@ -15,13 +15,14 @@ import contextlib
 import signal
 import threading
 import webbrowser
+from typing import TYPE_CHECKING
 
-from eyehil.drivers.errors import TrackerError
-from eyehil.drivers.setup_file import load_geometry
-from eyehil.drivers.view.server import ViewServer, wait_closed
-from eyehil.drivers.view.session import STREAMS
+if TYPE_CHECKING:
+    from eyehil.drivers.view.server import ViewServer
 
 DEFAULT_PORT = 8765
+#: the keys of `eyehil.drivers.view.session.STREAMS`, repeated so that the parser imports neither numpy nor OpenCV
+STREAMS = ("features", "both", "frames", "detect")
 
 
 def add_view_options(p: argparse.ArgumentParser, prefix: str = "") -> None:
@@ -56,6 +57,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def start_view(url: str, args: argparse.Namespace, geometry_path: str | None, **session_options) -> ViewServer:
     """Start the page server on `url` with the options of `add_view_options`; print its address (and open it)."""
+    from eyehil.drivers.setup_file import load_geometry
+    from eyehil.drivers.view.server import ViewServer
+
     recorder = None
     if args.record_video:
         from eyehil.drivers.view.video import VideoRecorder
@@ -83,6 +87,9 @@ def close_view(server: ViewServer) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from eyehil.drivers.errors import TrackerError
+    from eyehil.drivers.view.server import wait_closed
+
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:

@@ -18,10 +18,15 @@ import contextlib
 import importlib
 import signal
 import threading
+from typing import TYPE_CHECKING
 
-from eyehil.emulator.device.build import DeviceOptions, build_device, options_from_query
-from eyehil.emulator.device.links.base import LinkRunner
-from eyehil.emulator.scene import preset_names
+from eyehil.emulator.scene.presets_index import preset_names
+
+if TYPE_CHECKING:
+    from eyehil.emulator.device.build import DeviceOptions
+
+# The parser is built without numpy, scipy or OpenCV (`eyehil emulate --help` stays fast): the device's modules
+# are imported inside the functions that run it.
 
 #: link name -> "module:class"; the class takes (host, port) keywords where they mean something.
 LINKS: dict[str, str] = {
@@ -66,6 +71,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def options(args: argparse.Namespace) -> DeviceOptions:
     """`DeviceOptions` from the command line."""
+    from eyehil.emulator.device.build import DeviceOptions, options_from_query
+
     base = DeviceOptions(scene=args.scene, eyes=args.eyes, eye=args.eye, sides=args.sides or "", seed=args.seed,
                          script=args.script,
                          mode=args.mode, rate_hz=args.rate or (60 if args.link == "opengaze" else 250),
@@ -88,6 +95,9 @@ def make_link(kind: str, host: str, port: int):
 
 def make_runner(opts: DeviceOptions, args: argparse.Namespace):
     """A `LinkRunner` on the chosen link or, for ``--link zmq``, the Pupil Core facade (imported only then)."""
+    from eyehil.emulator.device.build import build_device
+    from eyehil.emulator.device.links.base import LinkRunner
+
     if args.link == "zmq":
         from eyehil.emulator.device.pupil.server import server_for
 
