@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from eyehil.analysis.output_folder import staged_folder
-from eyehil.analysis.study.runner import run_chunks
+from eyehil.analysis.study.runner import run_chunks, worker_pool
 
 GENEROUS_S = 120.0
 
@@ -32,8 +32,17 @@ def _blocked_unless_first(chunk: tuple[int, str]) -> int:
     return index
 
 
+def _interrupted_while_submitted(*, func, chunks: list, **_: object) -> None:
+    """`worker_pool` (as `eyehil discrepancy` uses it): Ctrl-C once chunk 0 is back, the others still running."""
+    with worker_pool(2) as pool:
+        futures = [pool.submit(func, c) for c in chunks]
+        futures[0].result()
+        raise KeyboardInterrupt
+
+
 @pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs a FIFO")
-def test_an_interrupt_terminates_the_workers_instead_of_waiting(tmp_path: Path) -> None:
+@pytest.mark.parametrize("run", [run_chunks, _interrupted_while_submitted])
+def test_an_interrupt_terminates_the_workers_instead_of_waiting(tmp_path: Path, run) -> None:
     fifo = tmp_path / "never-written"
     os.mkfifo(fifo)
     released = threading.Event()
@@ -54,7 +63,7 @@ def test_an_interrupt_terminates_the_workers_instead_of_waiting(tmp_path: Path) 
     chunks = [(i, str(fifo)) for i in range(6)]
     try:
         with pytest.raises(KeyboardInterrupt):
-            run_chunks(_blocked_unless_first, chunks, sizes=[1] * 6, workers=2, progress=progress)
+            run(func=_blocked_unless_first, chunks=chunks, sizes=[1] * 6, workers=2, progress=progress)
     finally:
         finished.set()
         for fd in held:

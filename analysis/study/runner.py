@@ -14,8 +14,9 @@ from __future__ import annotations
 
 import os
 import signal
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from contextlib import contextmanager
 from typing import Any
 
 #: s to wait for each terminated worker to exit
@@ -49,8 +50,7 @@ def run_chunks(
             tell(size)
         return out
     results: list[Any] = [None] * len(chunks)
-    pool = ProcessPoolExecutor(max_workers=workers, initializer=_ignore_sigint)
-    try:
+    with worker_pool(workers) as pool:
         blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         try:
             futures = {pool.submit(func, chunk, **kwargs): i for i, chunk in enumerate(chunks)}
@@ -60,11 +60,20 @@ def run_chunks(
             i = futures[future]
             results[i] = future.result()
             tell(sizes[i])
+    return results
+
+
+@contextmanager
+def worker_pool(workers: int) -> Iterator[ProcessPoolExecutor]:
+    """A process pool whose workers ignore Ctrl-C; if the block raises (Ctrl-C included) the pool is stopped at
+    once (`stop_pool`), otherwise shut down as usual (waiting for the work)."""
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=_ignore_sigint)
+    try:
+        yield pool
     except BaseException:
         stop_pool(pool)
         raise
     pool.shutdown()
-    return results
 
 
 def _ignore_sigint() -> None:
