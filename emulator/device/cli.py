@@ -19,10 +19,15 @@ import contextlib
 import importlib
 import signal
 import threading
+from typing import TYPE_CHECKING
 
-from eyehil.emulator.device.build import DeviceOptions, build_device, options_from_query, paced
-from eyehil.emulator.device.links.base import LinkRunner
-from eyehil.emulator.scene import preset_names
+from eyehil.emulator.scene.presets_index import preset_names
+
+if TYPE_CHECKING:
+    from eyehil.emulator.device.build import DeviceOptions
+
+# The parser is built without numpy, scipy or OpenCV (`eyehil emulate --help` stays fast): the device's modules
+# are imported inside the functions that run it.
 
 #: link name -> "module:class"; the class takes (host, port) keywords where they mean something.
 LINKS: dict[str, str] = {
@@ -37,7 +42,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--link", choices=sorted([*LINKS, "zmq", "opengaze"]), default="pty", help="transport (default pty)")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (tcp, usbip; default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=0, help="port (tcp default: any free port; usbip default 3240)")
+    p.add_argument("--port", type=port_number, default=0, help="port (tcp default: any free port; usbip default 3240)")
     p.add_argument("--scene", default="guestrin2006", help=f"preset ({', '.join(preset_names())}) or TOML path")
     p.add_argument("--eyes", default="normative:navarro", help="published | sample:N | normative:NAME")
     p.add_argument("--eye", type=int, default=0, help="which eye of --eyes (default 0)")
@@ -64,14 +69,28 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="opengaze: the gaze estimator calibrated (default: by the scene's LEDs)")
     p.add_argument("--duration", type=float, help="stop after this many seconds (default: until interrupted)")
     p.add_argument("--view", action="store_true", help="also serve the live web view (eyehil view) of this device")
-    p.add_argument("--view-port", type=int, default=8765, help="--view: port of the page (default 8765; 0 = any)")
+    p.add_argument("--view-port", type=port_number, default=8765,
+                   help="--view: port of the page (default 8765; 0 = any)")
     p.add_argument("--view-open", action="store_true", help="--view: open the page in the system browser")
     p.add_argument("--record-video", metavar="FILE", help="--view: also write the eye images (.mp4 or .png)")
     p.set_defaults(func=run)
 
 
+def port_number(text: str) -> int:
+    """argparse type of --port and --view-port: a TCP port, 0..65535 (0: any free port)."""
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a port number") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"{port} is not a TCP port (0..65535, 0 = any free port)")
+    return port
+
+
 def options(args: argparse.Namespace) -> DeviceOptions:
     """`DeviceOptions` from the command line."""
+    from eyehil.emulator.device.build import DeviceOptions, options_from_query
+
     base = DeviceOptions(scene=args.scene, eyes=args.eyes, eye=args.eye, sides=args.sides or "", seed=args.seed,
                          script=args.script,
                          mode=args.mode, rate_hz=args.rate or (60 if args.link == "opengaze" else 250),
@@ -95,6 +114,9 @@ def make_link(kind: str, host: str, port: int):
 
 def make_runner(opts: DeviceOptions, args: argparse.Namespace):
     """A `LinkRunner` on the chosen link or, for ``--link zmq``, the Pupil Core facade (imported only then)."""
+    from eyehil.emulator.device.build import build_device, paced
+    from eyehil.emulator.device.links.base import LinkRunner
+
     if opts.link_rate and args.link in ("zmq", "opengaze"):
         raise ValueError("--link-rate paces the native links (pty, tcp, usbip)")
     if args.link == "zmq":
