@@ -77,8 +77,10 @@ def worker_pool(workers: int) -> Iterator[ProcessPoolExecutor]:
 
 
 def _ignore_sigint() -> None:
-    """Worker initializer: Ctrl-C is the main process's to handle (it terminates the workers)."""
+    """Worker initializer: Ctrl-C is the main process's to handle (it terminates the workers); SIGTERM takes its
+    default action whatever handler the forked parent had installed (terminate must end a worker)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
@@ -90,6 +92,9 @@ def stop_pool(pool: ProcessPoolExecutor) -> None:
         process.terminate()
     for process in processes:
         process.join(JOIN_TIMEOUT_S)
+        if process.is_alive():  # did not take SIGTERM in time: no worker outlives the pool
+            process.kill()
+            process.join(JOIN_TIMEOUT_S)
 
 
 def _run_dask(func, chunks, sizes, address: str, tell, kwargs) -> list[Any]:

@@ -119,17 +119,19 @@ def run(args: argparse.Namespace) -> int:
 
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    try:
-        server = start_view(args.url, args, args.geometry, rate_hz=args.rate, timeout=args.timeout,
-                            autostart=not args.no_start)
-    except TrackerError as exc:
-        print(f"eyehil view: {type(exc).__name__}: {exc}")
-        return 1
-    try:
-        print(f"eyehil view: {args.url}; Ctrl-C stops", flush=True)
-        with contextlib.suppress(KeyboardInterrupt):
-            wait_closed(stop, args.duration)
+    try:  # whatever happens, the caller's SIGTERM handler comes back (a process forked later inherits ours)
+        try:
+            server = start_view(args.url, args, args.geometry, rate_hz=args.rate, timeout=args.timeout,
+                                autostart=not args.no_start)
+        except TrackerError as exc:
+            print(f"eyehil view: {type(exc).__name__}: {exc}")
+            return 1
+        try:
+            print(f"eyehil view: {args.url}; Ctrl-C stops", flush=True)
+            with contextlib.suppress(KeyboardInterrupt):
+                wait_closed(stop, args.duration)
+        finally:
+            close_view(server)
     finally:
-        close_view(server)
         signal.signal(signal.SIGTERM, previous)
     return 0

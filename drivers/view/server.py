@@ -57,6 +57,7 @@ class ViewServer:
         self._thread.start()
         self._ready.wait(30)
         if self._failure is not None:
+            self._thread.join(timeout=10)  # the thread is ending: let it, so that nothing outlives the failure
             raise self._failure
         return self
 
