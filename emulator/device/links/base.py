@@ -41,7 +41,9 @@ thread calls it)::
     connection_reset();  close()
 
 The runner's thread owns the core: it wakes at each sample's due time (real clock), whenever the link
-has room (fast clock) and whenever the link received bytes, which it feeds and answers at once.
+has room (fast clock: it pushes device time one block of samples at a time while the link holds less than
+`FAST_LOW_WATER` bytes, so a device in lockstep with its host never drops a sample for a slow host) and
+whenever the link received bytes, which it feeds and answers at once.
 
 Limits (a host that floods commands and never reads cannot grow the device): the runner's inbox holds at
 most `MAX_INBOX_BYTES` / `MAX_INBOX_CHUNKS`; bytes beyond are dropped and counted (`counters`
@@ -207,6 +209,8 @@ class LinkRunner:
                 self._flush()
             idle = self.core.next_due_us() is None
             return IDLE_WAIT_S if idle else (0.001 if self.link.backlog() >= FAST_LOW_WATER else 0.0)
+        if clock.fast:  # no host to pace a fast clock: wait for one (a connecting host wakes the thread)
+            return IDLE_WAIT_S
         due = self.core.next_due_us()
         return IDLE_WAIT_S if due is None else min(IDLE_WAIT_S, clock.wall_delay_s(due))
 
