@@ -122,8 +122,11 @@ class FastClock:
             self._pushed = max(self._pushed, int(t_us))
 
     def wall_delay_s(self, t_us: int) -> float:
-        """A fast clock never makes the streamer wait."""
-        return 0.0
+        """In lockstep, 0 (a pushing streamer never waits); with the wall floor, the wall-clock seconds until device
+        time reaches `t_us` if nobody pushes (a server that does not push waits as on the real clock)."""
+        if not self.wall_floor:
+            return 0.0
+        return max(0.0, (t_us - self.now_us()) / 1e6)
 
 
 class ManualClock:

@@ -20,7 +20,7 @@ def client(server):
     opened = []
 
     def make(**options):
-        srv = server(**options)
+        srv = server(clock="fast", **options)  # exact fixations whatever the load: the calibration is deterministic
         device = Device("127.0.0.1", srv.port)
         sub = device.subscribe_in_background(["notify.", "pupil.", "gaze."], buffer_size=5000)
         opened.append((device, sub))

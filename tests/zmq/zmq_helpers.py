@@ -9,18 +9,20 @@ from typing import Any
 from pupil_labs.pupil_core_network_client import Device
 
 from eyehil.emulator.device.build import DeviceOptions, build_subject
+from eyehil.emulator.device.clock import make_clock
 from eyehil.emulator.device.pupil.server import PupilServer, ServerOptions
 from eyehil.emulator.device.subject import Behaviour
 
 _DEVICE_KEYS = {"scene", "eyes", "eye", "sides", "seed"}
 
 
-def start_server(latency: float = 0.05, **options: Any) -> PupilServer:
+def start_server(latency: float = 0.05, clock: str = "real", **options: Any) -> PupilServer:
     """A started facade on a free port: `DeviceOptions` keys (scene, eyes, eye, sides, seed), the subject's
-    saccadic `latency` (s), and `ServerOptions` fields."""
+    saccadic `latency` (s), the `clock` ("fast": device time waits for the subject's exact fixation solves, so
+    what it streams does not depend on how busy the machine is) and `ServerOptions` fields."""
     device = {k: options.pop(k) for k in list(options) if k in _DEVICE_KEYS}
-    subject = build_subject(DeviceOptions(behaviour=Behaviour(latency_s=latency), **device))
-    return PupilServer(subject, options=ServerOptions(**{"port": 0, **options})).start()
+    subject = build_subject(DeviceOptions(behaviour=Behaviour(latency_s=latency), clock=clock, **device))
+    return PupilServer(subject, make_clock(clock), options=ServerOptions(**{"port": 0, **options})).start()
 
 
 def wait_for(sub, accept: Callable[[Any], bool], timeout_s: float = 10.0) -> Any:

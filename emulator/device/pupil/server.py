@@ -74,6 +74,8 @@ class PupilServer:
     def __init__(self, subject: Subject, clock: Clock | None = None, options: ServerOptions | None = None) -> None:
         """Serve `subject` on `clock` (default real time) as `options` say; `start` binds."""
         self.subject, self.clock = subject, clock or RealTimeClock()
+        if hasattr(self.clock, "paused"):
+            subject.pause_clock = self.clock.paused  # a fast clock's time waits for the subject's exact solves
         self.options = options or ServerOptions()
         self.time = PupilTime(self.clock)
         self.port = self.pub_port = self.sub_port = 0
