@@ -35,13 +35,13 @@ def client(server):
 
 def _until(sub, t_end: float) -> None:
     """Wait until a pupil datum at or after Pupil time `t_end` arrives."""
-    wait_for(sub, lambda m: m.topic.startswith("pupil.") and m.payload["timestamp"] >= t_end, 20.0)
+    wait_for(sub, lambda m: m.topic.startswith("pupil.") and m.payload["timestamp"] >= t_end)
 
 
 def _finish(device: Device, sub) -> dict:
     """Stop the calibration; the result.v2 payload (asserting the notifications' order)."""
     assert device.request_calibration_stop() == "OK"
-    outcome = wait_for(sub, lambda m: m.topic in ("notify.calibration.successful", "notify.calibration.failed"), 30)
+    outcome = wait_for(sub, lambda m: m.topic in ("notify.calibration.successful", "notify.calibration.failed"))
     assert outcome.topic == "notify.calibration.successful", outcome.payload.get("reason")
     result = wait_for(sub, topic_is("notify.calibration.result.v2")).payload
     wait_for(sub, topic_is("notify.calibration.stopped"))  # after the outcome (docs/zmq.md)

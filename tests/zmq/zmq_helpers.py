@@ -25,7 +25,11 @@ def start_server(latency: float = 0.05, clock: str = "real", **options: Any) -> 
     return PupilServer(subject, make_clock(clock), options=ServerOptions(**{"port": 0, **options})).start()
 
 
-def wait_for(sub, accept: Callable[[Any], bool], timeout_s: float = 10.0) -> Any:
+GENEROUS_S = 120.0  # bounds a wait for the facade's threads (a calibration fit takes seconds of CPU; a busy
+# machine gives this process a fraction of a core): only a hang reaches it
+
+
+def wait_for(sub, accept: Callable[[Any], bool], timeout_s: float = GENEROUS_S) -> Any:
     """The first message of the client subscription `sub` that `accept`s, or AssertionError at the timeout."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
