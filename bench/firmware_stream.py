@@ -1,8 +1,8 @@
 """Benchmark: the C firmware in the loop streaming FEATURES in real time (500 Hz, guestrin2006, the demo script):
 how many exposures reach the host, how many are lost on the way (its camera's sensor is a thread of this process:
 on a busy machine an exposure it cannot serve in time is lost), and the rate achieved. Figures are reported, not
-asserted: tests/firmware/test_firmware.py compares the values of every exposure that arrives and accounts for
-every loss, whatever the load; this is where "none lost at 500 Hz on a quiet machine" is measured (issue 17).
+asserted: tests/firmware/ run the firmware with ``--clock fast`` (lockstep with the host: nothing lost whatever the
+load); this is where losses in real time are measured (issue 17).
 The load average is printed beside the figures.
 """
 

@@ -94,7 +94,9 @@ def _received(samples) -> dict[str, np.ndarray]:
 
 @pytest.mark.parametrize("scene", SCENES)
 def test_streamed_features_equal_the_emulators_for_the_same_exposures(rig, scene: str) -> None:
-    options = {"scene": scene, "script": "demo"}  # fixations, saccades, a blink: exact and interpolated features
+    # fixations, saccades, a blink: exact and interpolated features; the fast clock (lockstep with this host), so
+    # that no exposure is lost however busy the machine (real time: python -m bench firmware_stream)
+    options = {"scene": scene, "script": "demo", "clock": "fast"}
     with open_tracker(rig(**options).url) as tracker:
         tracker.configure(rate_hz=RATE_HZ)
         tracker.start()
@@ -104,14 +106,8 @@ def test_streamed_features_equal_the_emulators_for_the_same_exposures(rig, scene
         status = tracker.status()
         assert tracker.drain() == []  # nothing streamed after the ACK (it would have come before the STATUS)
     frame_ids = np.array([s.frame_id for s in samples])
-    skipped = np.diff(frame_ids) - 1
-    assert frame_ids[0] == 0 and np.all(skipped >= 0)  # in order, the first stream since power-up
-    # The firmware runs on the wall clock: an exposure its sensor (a thread of this process) could not serve in
-    # time on a loaded machine is lost. Every loss is accounted for, and the features of every exposure that
-    # arrived are compared below; the real-time figure (none lost at 500 Hz on a quiet machine) is
-    # `python -m bench firmware`'s, not this test's.
-    assert status.samples_sent == len(samples) and tracker.stats.lost_frames == 0  # the link lost nothing
-    assert tracker.stats.skipped_exposures == int(skipped.sum()) <= status.samples_dropped
+    np.testing.assert_array_equal(frame_ids, np.arange(len(samples)))  # none lost, first stream since power-up
+    assert status.samples_sent == len(samples) and status.samples_dropped == 0
     _, leds, eyes = SCENES[scene]
     t0 = samples[0].device_us - 1_000_000 // RATE_HZ
     times, expected = _reference(options, frame_ids, t0, eyes, leds)
