@@ -54,7 +54,7 @@ def test_clock_sync_round_trip(device_url) -> None:
         start = time.monotonic()
         sync = tracker.sync_clock(4)
         spent_us = (time.monotonic() - start) * 1e6
-    assert 0 <= sync.rtt_us <= spent_us  # a round trip within the sync's own span (not a guess of the machine's load)
+    assert 0 <= sync.rtt_us <= spent_us + 1  # within the sync's own span (+1 us: whole microseconds)
 
 
 def test_binocular_stream_and_stimulus(device_url) -> None:
