@@ -58,7 +58,7 @@ def test_inlet_receives_gaze_stream(server) -> None:
     finally:
         inlet.close_stream()
         del inlet
-    eventually(lambda: srv.outlet.pushed > 2)
+    eventually(srv, lambda: srv.outlet.pushed > 2)
 
 
 def test_source_id_is_stable_across_restarts_of_the_same_device(server) -> None:

@@ -101,5 +101,5 @@ def test_bad_reference_data_is_counted_not_fatal(client) -> None:
     device.send_notification({"subject": "calibration.add_ref_data", "ref_data": bad})
     device.send_notification({"subject": "calibration.add_ref_data", "ref_data": "nothing"})
     device.send_notification({"subject": "eyehil.stimulus", "norm_pos": "centre"})
-    eventually(lambda: srv.counters["ref_data_refused"] == 4 and srv.counters["targets_refused"] == 2)
+    eventually(srv, lambda: srv.counters["ref_data_refused"] == 4 and srv.counters["targets_refused"] == 2)
     assert device.request_version()

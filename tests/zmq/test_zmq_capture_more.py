@@ -115,7 +115,7 @@ def test_annotations_are_bounded_in_bytes_and_recordings_stay_in_record_dir(serv
     for payload in (big, small):
         req.send_multipart([b"annotation", msgpack.packb(payload)])
         assert req.recv_string() == "Message forwarded."
-    eventually(lambda: srv.counters["annotations"] == 1 and srv.counters["annotations_refused"] == 1)
+    eventually(srv, lambda: srv.counters["annotations"] == 1 and srv.counters["annotations_refused"] == 1)
     assert _ask(req, "r") == "OK"
     _next(sub, "notify.recording.stopped")
     folder = record_dir / started["session_name"]

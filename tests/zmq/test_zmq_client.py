@@ -155,4 +155,4 @@ def test_high_frequency_message_sending(server, device_of, subscribe) -> None:
             device.send_annotation("burst", index=i)
         last = wait_for(sub, lambda m: m.payload.get("index") == 499)
     assert last.payload["label"] == "burst"
-    eventually(lambda: sum(a["label"] == "burst" for a in srv.annotations) == 500)
+    eventually(srv, lambda: sum(a["label"] == "burst" for a in srv.annotations) == 500)

@@ -57,10 +57,8 @@ def subscribed(device: Device, sub, timeout_s: float = 10.0) -> None:
     raise AssertionError("the subscription never received a notification")
 
 
-def eventually(condition: Callable[[], bool], timeout_s: float = 10.0) -> None:
-    """Poll `condition` (something another thread will make true) until it holds, or AssertionError."""
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"condition not met within {timeout_s} s")
-        time.sleep(0.005)
+def eventually(srv: PupilServer, condition: Callable[[], bool], timeout_s: float = GENEROUS_S) -> None:
+    """Wait until `condition` (on what `srv`'s device thread changes) holds, re-checked each time that thread
+    completes a turn (an explicit event, no sleeps), or AssertionError at the timeout."""
+    if not srv.wait_until(condition, timeout_s):
+        raise AssertionError(f"condition not met within {timeout_s} s")

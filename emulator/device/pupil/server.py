@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import time
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import zmq
@@ -179,6 +180,14 @@ class PupilServer:
         device.start()
 
     # --- state and close --------------------------------------------------------------------------
+    def wait_until(self, condition: Callable[[], bool], timeout_s: float | None = None) -> bool:
+        """Wait until `condition()` (on what the device thread changes: `counters`, `annotations`, the outlet)
+        holds, re-checked after each turn of the device thread's loop (each batch of messages or exposures, at
+        least every `core.IDLE_S`); False at the timeout. For tests and tools: no polling with sleeps."""
+        stepped = self.device.stepped
+        with stepped:
+            return stepped.wait_for(condition, timeout_s)
+
     @property
     def counters(self) -> Counter[str]:
         """What the facade counted: requests, messages, exposures, drops (docs/zmq.md; 0 if never); any thread."""
