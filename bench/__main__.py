@@ -22,6 +22,7 @@ BENCHMARKS = [
     "opengaze",  # Gazepoint Open Gaze samples at 60 and 150 Hz (bench/opengaze.py)
     "discrepancy",  # the default eyehil discrepancy run (bench/discrepancy.py)
     "firmware",  # the firmware's C feature extractor (bench/firmware.py)
+    "firmware_stream",  # the C firmware streaming 500 Hz in real time: exposures lost (bench/firmware_stream.py)
 ]
 ON_REQUEST = ["fuzz", "soak", "faults", "stimulus"]  # long runs, and the STIMULUS ACK latency alone
 

@@ -3,7 +3,13 @@
  * the UART on a file descriptor and hal_idle (poll). The camera, LEDs and stimulus are in hal_sensor.c.
  *
  *   eyehil-firmware --sensor SOCKET [--pty | --uart PATH] [--camera features|pixels] [--mode native|iscan]
- *                   [--rate HZ]   (ISCAN's fixed rate, default 120)
+ *                   [--rate HZ]   (ISCAN's fixed rate, default 120)   [--clock real|fast]
+ *
+ * Clock: real (CLOCK_MONOTONIC since hal_init), or fast: virtual time in lockstep with the host, as the Python
+ * device's fast clock. While the camera streams, time jumps to the next exposure as soon as everything sent so far
+ * has been taken by the UART's descriptor (the kernel's buffer), and stands still while it has not; so a slow or
+ * descheduled host, or a slow sensor, never makes an exposure fall due that the firmware cannot send, and nothing
+ * is lost or dropped for it. While the camera is stopped, time runs with the wall clock.
  *
  * UART: stdin/stdout by default; --uart PATH opens a serial device or a pseudo-terminal (raw mode if a
  * terminal); --pty creates a pseudo-terminal. With either, the firmware prints "url: PATH" on stdout once it
@@ -40,6 +46,8 @@ static struct {
     uint8_t tx[TX_RING];
     size_t tx_head, tx_len;
     struct timespec t0;
+    int fast;                   /* --clock fast: virtual time (now_us) in lockstep with the host */
+    uint64_t now_us;
 } emu = {.rx_fd = 0, .tx_fd = 1, .pty_slave = -1};
 
 static volatile sig_atomic_t stop_requested;
@@ -91,7 +99,7 @@ static int open_pty(const char **path)
 static int usage(const char *argv0)
 {
     fprintf(stderr, "usage: %s --sensor SOCKET [--pty | --uart PATH] [--camera features|pixels] "
-                    "[--mode native|iscan] [--rate HZ]\n", argv0);
+                    "[--mode native|iscan] [--rate HZ] [--clock real|fast]\n", argv0);
     return HAL_ERR_INVALID;
 }
 
@@ -162,6 +170,10 @@ int hal_init(int argc, char **argv)
             boot.mode = HAL_MODE_ISCAN, i++;
         else if (strcmp(argv[i], "--rate") == 0 && i + 1 < argc && parse_rate(argv[i + 1], &boot.iscan_rate_hz))
             i++;
+        else if (strcmp(argv[i], "--clock") == 0 && i + 1 < argc && strcmp(argv[i + 1], "real") == 0)
+            emu.fast = 0, i++;
+        else if (strcmp(argv[i], "--clock") == 0 && i + 1 < argc && strcmp(argv[i + 1], "fast") == 0)
+            emu.fast = 1, i++;
         else if (strcmp(argv[i], "--camera") == 0 && i + 1 < argc && strcmp(argv[i + 1], "features") == 0)
             sources = HAL_SOURCE_FEATURES, i++;
         else if (strcmp(argv[i], "--camera") == 0 && i + 1 < argc && strcmp(argv[i + 1], "pixels") == 0)
@@ -221,7 +233,7 @@ int hal_shutdown(void)
     return status;
 }
 
-uint64_t hal_clock_us(void)
+static uint64_t wall_us(void)
 {
     struct timespec now;
     int64_t us;
@@ -229,6 +241,11 @@ uint64_t hal_clock_us(void)
     clock_gettime(CLOCK_MONOTONIC, &now);
     us = (int64_t)(now.tv_sec - emu.t0.tv_sec) * 1000000 + (now.tv_nsec - emu.t0.tv_nsec) / 1000;
     return us > 0 ? (uint64_t)us : 0;
+}
+
+uint64_t hal_clock_us(void)
+{
+    return emu.fast ? emu.now_us : wall_us();
 }
 
 /* --- UART --------------------------------------------------------------------------------------------- */
@@ -289,7 +306,8 @@ static int timeout_ms(uint64_t until_us)
     return (until_us - now) >= 1000000u ? 1000 : (int)((until_us - now + 999u) / 1000u);
 }
 
-void hal_idle(uint64_t until_us)
+/* Wait at most timeout_ms for the UART (input, or room for queued output) or the sensor, and serve them. */
+static void wait_io(int timeout)
 {
     struct pollfd fds[3];
     nfds_t n = 0;
@@ -310,10 +328,39 @@ void hal_idle(uint64_t until_us)
     sensor_slot = (int)n;
     fds[n].fd = sensor_fd();
     fds[n++].events = POLLIN;
-    if (poll(fds, n, timeout_ms(until_us)) <= 0)
+    if (poll(fds, n, timeout) <= 0)
         return;
     if (tx_slot >= 0 && (fds[tx_slot].revents & POLLOUT))
         uart_flush();
     if (fds[sensor_slot].revents & (POLLIN | POLLHUP | POLLERR))
         sensor_readable();
+}
+
+/* The fast clock: the next exposure at once if the host has taken everything, else wait (time stands still). */
+static void fast_idle(uint64_t until_us)
+{
+    uint64_t due = sensor_next_due_us(), before;
+
+    if (due != SENSOR_NEVER) {
+        if (emu.tx_len == 0) {
+            if (due > emu.now_us)
+                emu.now_us = due;
+            wait_io(0); /* still serve the host's input */
+        } else {
+            wait_io(10);
+        }
+        return;
+    }
+    before = wall_us(); /* the camera is stopped: time runs with the wall clock */
+    wait_io(until_us <= emu.now_us ? 0 : (until_us - emu.now_us) >= 1000000u ? 1000
+                                       : (int)((until_us - emu.now_us + 999u) / 1000u));
+    emu.now_us += wall_us() - before;
+}
+
+void hal_idle(uint64_t until_us)
+{
+    if (emu.fast)
+        fast_idle(until_us);
+    else
+        wait_io(timeout_ms(until_us));
 }

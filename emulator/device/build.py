@@ -114,7 +114,7 @@ def build_subject(options: DeviceOptions, appearance: bool = True) -> Subject:
 def build_device(options: DeviceOptions | None = None) -> VirtualTracker | IscanTracker:
     """A device core (native `VirtualTracker` or `IscanTracker`) as `options` say."""
     options = options or DeviceOptions()
-    clock = make_clock(options.clock, options.speed)
+    clock = make_clock(options.clock, options.speed, lockstep=True)  # the runner or loop port pushes time
     subject = build_subject(options, appearance=options.mode == "native")
     if options.mode == "iscan":
         return IscanTracker(subject, clock, rate_hz=options.rate_hz)

@@ -6,9 +6,13 @@ sender's monotonic clock since an arbitrary epoch, here the clock's creation). T
 - `RealTimeClock(speed=1.0)`: ``time.monotonic_ns`` since creation, optionally scaled (``speed=10``
   runs the device ten times faster than the wall clock: a 500 Hz stream then carries 5000 samples per
   wall-clock second, with device timestamps 2 ms apart).
-- `FastClock()`: "as fast as possible". Device time never runs slower than the wall clock, but the
-  streamer may `push` it ahead to the next sample's exposure time whenever the link has room, so
-  samples are produced as fast as the host consumes them (the link's buffers are the only pacing).
+- `FastClock()`: "as fast as possible". The streamer `push`es device time to the next sample's exposure
+  time whenever the link has room, so samples are produced as fast as the host consumes them (the link's
+  buffers are the only pacing). A native device (`build.build_device`: loop://, pty, TCP, USB/IP) runs it in
+  lockstep with its host (``wall_floor=False``): device time moves only with those pushes, so a slow or
+  descheduled host (a busy machine) never makes samples fall due faster than it reads them, and nothing is
+  dropped for it. Servers that never push (the ZeroMQ and Open Gaze facades) keep the wall-clock floor:
+  their device time never runs slower than the wall clock.
 
 `ManualClock` (tests, benchmarks) moves only when told. All are monotonic and thread-safe for one
 writer (the streamer) and any number of readers.
@@ -66,7 +70,8 @@ class RealTimeClock:
 
 
 class FastClock:
-    """Device time = max(wall-clock time since creation minus the time spent `paused`, the latest `push`).
+    """Device time = max(wall-clock time since creation minus the time spent `paused`, the latest `push`);
+    without `wall_floor`, the latest `push` alone (lockstep: virtual time moves only when the streamer says).
 
     `paused()` is a context manager for the device's own waits (the subject waiting for an exact fixation
     solve): virtual time does not run on while the simulation itself is behind, so no sample falls due
@@ -75,8 +80,9 @@ class FastClock:
 
     fast = True
 
-    def __init__(self) -> None:
-        """Start the clock at 0 us now."""
+    def __init__(self, wall_floor: bool = True) -> None:
+        """Start the clock at 0 us now; `wall_floor`: device time never runs slower than the wall clock."""
+        self.wall_floor = wall_floor
         self._t0_ns = time.monotonic_ns()
         self._pushed = 0
         self._lock = threading.Lock()
@@ -98,7 +104,11 @@ class FastClock:
                     self._paused_since = None
 
     def now_us(self) -> int:
-        """Microseconds since creation (less the time paused), or the pushed time if that is later."""
+        """Microseconds since creation (less the time paused), or the pushed time if that is later (without the
+        wall floor: the pushed time)."""
+        if not self.wall_floor:
+            with self._lock:
+                return self._pushed
         with self._lock:
             wall_ns = self._paused_since if self._paused_since is not None else time.monotonic_ns()
         wall = (wall_ns - self._t0_ns) // 1000
@@ -112,8 +122,11 @@ class FastClock:
             self._pushed = max(self._pushed, int(t_us))
 
     def wall_delay_s(self, t_us: int) -> float:
-        """A fast clock never makes the streamer wait."""
-        return 0.0
+        """In lockstep, 0 (a pushing streamer never waits); with the wall floor, the wall-clock seconds until device
+        time reaches `t_us` if nobody pushes (a server that does not push waits as on the real clock)."""
+        if not self.wall_floor:
+            return 0.0
+        return max(0.0, (t_us - self.now_us()) / 1e6)
 
 
 class ManualClock:
@@ -147,10 +160,11 @@ class ManualClock:
         return 0.0
 
 
-def make_clock(kind: str = "real", speed: float = 1.0) -> Clock:
-    """`"real"` (optionally scaled by `speed`) or `"fast"`."""
+def make_clock(kind: str = "real", speed: float = 1.0, lockstep: bool = False) -> Clock:
+    """`"real"` (optionally scaled by `speed`) or `"fast"` (with `lockstep`, without the wall-clock floor: for a
+    streamer that pushes time as its host reads)."""
     if kind == "real":
         return RealTimeClock(speed)
     if kind == "fast":
-        return FastClock()
+        return FastClock(wall_floor=not lockstep)
     raise ValueError(f"clock must be 'real' or 'fast', got {kind!r}")

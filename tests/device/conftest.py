@@ -11,6 +11,7 @@ from collections.abc import Callable, Iterator
 
 import pytest
 from device_helpers import start_emulator
+from host_deadlines import generous
 from leaks import leak_check
 
 BACKENDS = ["loop", "pty", "tcp", "usbip"]
@@ -21,6 +22,12 @@ def no_leaks() -> Iterator[None]:
     """Fail the test if it leaves an emulator thread, link, pseudo-terminal, socket or pipe behind."""
     with leak_check("eyehil", kinds=("socket:", "pipe:", "/dev/ptmx", "/dev/pts/")):
         yield
+
+
+@pytest.fixture(autouse=True)
+def generous_host_deadlines(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The host waits generously for replies and samples (a busy machine; tests/host_deadlines.py)."""
+    generous(monkeypatch)
 
 
 @pytest.fixture(params=BACKENDS)

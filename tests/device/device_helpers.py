@@ -87,10 +87,12 @@ class DeadLink:
         self.timeout = 0.0
         self.written = bytearray()
         self.closed = False
+        self.waited_s = 0.0  # the reads' timeouts added up: how long the host chose to wait in all
         self._never = threading.Event()
 
     def read(self, size: int = 1) -> bytes:
         if self.timeout:
+            self.waited_s += self.timeout
             self._never.wait(self.timeout)
         return b""
 

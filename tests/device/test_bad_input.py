@@ -4,8 +4,6 @@ exactly and never hangs."""
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 from device_helpers import CoreHost, DeadLink, FrameFilter, core_device, start_emulator
@@ -159,10 +157,11 @@ def test_lost_ack_is_retried_and_busy_start_counts_as_started(device_url) -> Non
 
 def test_host_never_hangs_on_a_silent_device() -> None:
     dead = DeadLink()
-    start = time.monotonic()
     with pytest.raises(TrackerTimeoutError):
         Tracker(dead, response_timeout=0.05, retries=2)
-    assert time.monotonic() - start < 1.0 and dead.written.count(b"\x00") >= 3
+    # three attempts, and the host asked to wait no longer than their three response deadlines in all (what the
+    # host decided, not how long a busy machine took to run it)
+    assert dead.written.count(b"\x00") >= 3 and 0 < dead.waited_s <= 3 * 0.05 + 1e-9
 
 
 def test_host_disconnects_and_reconnects_mid_stream() -> None:

@@ -112,10 +112,10 @@ def test_frames_are_the_device_render_and_detect_to_the_truth(backend: str, scen
     print(message)
     # the fast clock runs in lockstep with the host: no image is dropped for a slow host or a busy machine; only the
     # images of the exposure being sent when STOP came may be cut off (abandoned, counted)
-    missing = sorted({frame_id for frame_id, _eye in expected if (frame_id, _eye) not in images})
-    assert missing in ([], [samples[-1].frame_id]), f"images missing of exposures {missing}; {message}"
+    missing = [key for key in expected if key not in images]
+    assert {frame_id for frame_id, _ in missing} <= {samples[-1].frame_id}, f"images missing: {missing}; {message}"
     assert status.samples_dropped == 0 and status.frames_dropped <= len(eyes) and blinks > 0, status
-    assert compared == len(expected) - len(eyes) * len(missing) and compared > 0.9 * len(samples) * len(eyes)
+    assert compared == len(expected) - len(missing) > 0
     assert rms[0] < TOLERANCE_PX and rms[1] < TOLERANCE_PX, message
 
 
@@ -123,8 +123,8 @@ def test_frames_are_the_device_render_and_detect_to_the_truth(backend: str, scen
 @pytest.mark.parametrize("scene_name, method", [("guestrin2006", "guestrin"), ("blignaut2014", "blignaut")])
 def test_frames_only_calibration_matches_exact_features(tmp_path, backend: str, scene_name: str, method: str) -> None:
     geometry = load_geometry(write_geometry(load_scene(scene_name), tmp_path / "geometry.toml")).geometry
-    # 15 exposures per target: on the fast clock an image the link cannot take yet is dropped (counted), and how
-    # many are depends on how busy the machine is; the accuracy asserted below does not
+    # 15 exposures per target (0.3 s at 50 Hz), every one: the fast clock runs in lockstep with the host, so no image
+    # is dropped however busy the machine is
     plan = Plan.default(geometry.screen, settle_s=0.4, collect_s=0.3)
     url, close = start_emulator(backend, scene=scene_name, eyes=EYES, eye=EYE, rate=50)
     try:
@@ -133,7 +133,7 @@ def test_frames_only_calibration_matches_exact_features(tmp_path, backend: str, 
             assert tracker.stats.samples == 0 and tracker.stats.images > 0  # frames only: no FEATURES came
     finally:
         close()
-    assert all(len(f) >= 3 for f in result.fixations)  # 15 exposures per target at 50 Hz, some may be dropped
+    assert [len(f) for f in result.fixations] == [15] * len(result.fixations)
     offline = _offline(scene_name, method, plan, quantise=False)
     difference = np.abs(result.errors_deg - offline)
     message = (f"{method} over {backend}: validation errors from frames {np.round(result.errors_deg, 3)} deg, from "

@@ -8,6 +8,7 @@ from collections.abc import Callable, Iterator
 
 import pytest
 from firmware_helpers import FirmwareBuild, FirmwareRig, build_firmware, compiler_missing
+from host_deadlines import generous
 from leaks import leak_check
 
 
@@ -16,6 +17,12 @@ def no_leaks() -> Iterator[None]:
     """Fail the test if it leaves a sensor thread, socket, pipe or pseudo-terminal open."""
     with leak_check("eyehil", kinds=("socket:", "pipe:", "/dev/ptmx", "/dev/pts/")):
         yield
+
+
+@pytest.fixture(autouse=True)
+def generous_host_deadlines(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The host waits generously for replies and samples (a busy machine; tests/host_deadlines.py)."""
+    generous(monkeypatch)
 
 
 @pytest.fixture(scope="session")

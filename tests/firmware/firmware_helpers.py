@@ -75,7 +75,8 @@ class FirmwareRig:
         """Start both; `camera`: "features" (the sensor detects) or "pixels" (raw frames, the firmware extracts);
         `wrapper`: a command the firmware runs under (e.g. valgrind); `args`: more firmware arguments (e.g.
         ``("--mode", "iscan")``); `options` are
-        `eyehil.emulator.device.build.options_from_query` keys (scene, eye, script ...)."""
+        `eyehil.emulator.device.build.options_from_query` keys (scene, eye, script ...); ``clock="fast"`` runs the
+        firmware in lockstep with its host (``--clock fast``) and lets the sensor's subject wait for exact solves."""
         self._dir = Path(tempfile.mkdtemp(prefix="eyehil-fw-"))  # short: socket paths are limited to 107 bytes
         self.log = self._dir / "firmware.log"
         self.sensor = FirmwareSensor.from_options(options_from_query(urlencode(options)), frames=camera == "pixels")
@@ -84,7 +85,8 @@ class FirmwareRig:
         try:
             with self.log.open("wb") as log:
                 self.process = subprocess.Popen([*wrapper, str(binary), "--pty", "--sensor", self.server.path,
-                                                 "--camera", camera, *args], stdout=subprocess.PIPE, stderr=log)
+                                                 "--camera", camera, "--clock", str(options.get("clock", "real")),
+                                                 *args], stdout=subprocess.PIPE, stderr=log)
             self.url = _read_url(self.process, self.log)
         except BaseException:
             self.close(check=False)

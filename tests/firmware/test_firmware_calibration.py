@@ -26,7 +26,7 @@ def test_calibration_through_the_firmware_matches_the_python_device(rig, tmp_pat
                                                                     method: str) -> None:
     geometry = load_geometry(write_geometry(load_scene(scene_name), tmp_path / "geometry.toml")).geometry
     plan = Plan.default(geometry.screen, settle_s=0.4, collect_s=0.05)
-    with open_tracker(rig(scene=scene_name, eyes=EYES, eye=EYE).url) as tracker:
+    with open_tracker(rig(scene=scene_name, eyes=EYES, eye=EYE, clock="fast").url) as tracker:  # lockstep: none lost
         firmware = calibrate(tracker, geometry, method, plan, rate_hz=RATE_HZ)
     with open_tracker(f"loop://?scene={scene_name}&eyes={EYES}&eye={EYE}&clock=fast") as tracker:
         python = calibrate(tracker, geometry, method, plan, rate_hz=RATE_HZ)

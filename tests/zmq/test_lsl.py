@@ -33,6 +33,7 @@ def test_channel_layout() -> None:
 
 
 def test_inlet_receives_gaze_stream(server) -> None:
+    opened = pylsl.local_clock()
     srv = server(scene="guestrin2006", rate_hz=100, lsl=True)
     streams = pylsl.resolve_byprop("source_id", srv.outlet_source_id, timeout=10)
     assert streams, "the outlet was not found"
@@ -48,7 +49,7 @@ def test_inlet_receives_gaze_stream(server) -> None:
                                "coordinate_system": "eye0"}
         sample, stamp = inlet.pull_sample(timeout=10)
         assert sample is not None and len(sample) == len(channels)
-        assert abs(stamp - pylsl.local_clock()) < 1.0
+        assert opened < stamp <= pylsl.local_clock()  # on LSL's clock: an exposure between start-up and now
         values = dict(zip((c["label"] for c in channels), sample, strict=True))
         assert math.isnan(values["norm_pos_x"]) and values["confidence"] == 0  # not calibrated
         assert values["confidence0"] == 1 and 0 < values["pupil0_x"] < 320 and values["diameter0_2d"] > 10
@@ -57,7 +58,7 @@ def test_inlet_receives_gaze_stream(server) -> None:
     finally:
         inlet.close_stream()
         del inlet
-    eventually(lambda: srv.outlet.pushed > 2)
+    eventually(srv, lambda: srv.outlet.pushed > 2)
 
 
 def test_source_id_is_stable_across_restarts_of_the_same_device(server) -> None:

@@ -96,7 +96,7 @@ def test_malformed_messages_on_the_backbone(server, client_context) -> None:
         return srv.counters["messages_malformed"] >= len(bad)
 
     try:
-        eventually(heard)
+        eventually(srv, heard)
     finally:
         pub.close(linger=0)
     _still_serving(srv)

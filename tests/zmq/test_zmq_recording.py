@@ -42,7 +42,7 @@ def test_a_recording_holds_pupil_gaze_notifications_and_annotations(server, devi
     first_gaze = wait_for(sub, lambda m: m.topic.startswith("gaze.3d.")).payload
     wait_for(sub, lambda m: m.topic.startswith("gaze.3d.") and m.payload["timestamp"] > first_gaze["timestamp"] + 0.2)
     device.send_annotation("trial", duration=0.5, extra={"k": 1})
-    eventually(lambda: srv.counters["annotations"] == 1)
+    eventually(srv, lambda: srv.counters["annotations"] == 1)
     assert device.request_recording_stop() == "OK"
     wait_for(sub, topic_is("notify.recording.stopped"))
 

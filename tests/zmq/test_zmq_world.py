@@ -141,7 +141,7 @@ def test_stop_plugin_stops_world_frames(server, device_of, subscribe) -> None:
     wait_for(sub, topic_is("notify.frame_publishing.stopped"))
     stopped_at = srv.counters["world_published"] + srv.counters["world_dropped"]
     exposures = srv.counters["exposures"]
-    eventually(lambda: srv.counters["exposures"] > exposures + 250)  # a second of exposures at 250 Hz
+    eventually(srv, lambda: srv.counters["exposures"] > exposures + 250)  # a second of exposures at 250 Hz
     assert srv.counters["world_published"] + srv.counters["world_dropped"] <= stopped_at + 2  # at most QUEUE waiting
 
 

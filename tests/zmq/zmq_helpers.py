@@ -9,21 +9,27 @@ from typing import Any
 from pupil_labs.pupil_core_network_client import Device
 
 from eyehil.emulator.device.build import DeviceOptions, build_subject
+from eyehil.emulator.device.clock import make_clock
 from eyehil.emulator.device.pupil.server import PupilServer, ServerOptions
 from eyehil.emulator.device.subject import Behaviour
 
 _DEVICE_KEYS = {"scene", "eyes", "eye", "sides", "seed"}
 
 
-def start_server(latency: float = 0.05, **options: Any) -> PupilServer:
+def start_server(latency: float = 0.05, clock: str = "real", **options: Any) -> PupilServer:
     """A started facade on a free port: `DeviceOptions` keys (scene, eyes, eye, sides, seed), the subject's
-    saccadic `latency` (s), and `ServerOptions` fields."""
+    saccadic `latency` (s), the `clock` ("fast": device time waits for the subject's exact fixation solves, so
+    what it streams does not depend on how busy the machine is) and `ServerOptions` fields."""
     device = {k: options.pop(k) for k in list(options) if k in _DEVICE_KEYS}
-    subject = build_subject(DeviceOptions(behaviour=Behaviour(latency_s=latency), **device))
-    return PupilServer(subject, options=ServerOptions(**{"port": 0, **options})).start()
+    subject = build_subject(DeviceOptions(behaviour=Behaviour(latency_s=latency), clock=clock, **device))
+    return PupilServer(subject, make_clock(clock), options=ServerOptions(**{"port": 0, **options})).start()
 
 
-def wait_for(sub, accept: Callable[[Any], bool], timeout_s: float = 10.0) -> Any:
+GENEROUS_S = 120.0  # bounds a wait for the facade's threads (a calibration fit takes seconds of CPU; a busy
+# machine gives this process a fraction of a core): only a hang reaches it
+
+
+def wait_for(sub, accept: Callable[[Any], bool], timeout_s: float = GENEROUS_S) -> Any:
     """The first message of the client subscription `sub` that `accept`s, or AssertionError at the timeout."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
@@ -51,10 +57,8 @@ def subscribed(device: Device, sub, timeout_s: float = 10.0) -> None:
     raise AssertionError("the subscription never received a notification")
 
 
-def eventually(condition: Callable[[], bool], timeout_s: float = 10.0) -> None:
-    """Poll `condition` (something another thread will make true) until it holds, or AssertionError."""
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"condition not met within {timeout_s} s")
-        time.sleep(0.005)
+def eventually(srv: PupilServer, condition: Callable[[], bool], timeout_s: float = GENEROUS_S) -> None:
+    """Wait until `condition` (on what `srv`'s device thread changes) holds, re-checked each time that thread
+    completes a turn (an explicit event, no sleeps), or AssertionError at the timeout."""
+    if not srv.wait_until(condition, timeout_s):
+        raise AssertionError(f"condition not met within {timeout_s} s")

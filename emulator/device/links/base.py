@@ -44,9 +44,11 @@ thread calls it)::
     connection_reset();  close()
 
 The runner's thread owns the core: it wakes at each sample's due time (real clock), whenever the link
-has room (fast clock) and whenever the link received bytes, which it feeds and answers at once. A link with
-`pump()` and `wake_delay_s()` (`paced.PacedLink`, the link-rate option) is also pumped at each wake-up and
-wakes the runner when it can take more.
+has room (fast clock: it pushes device time one block of samples at a time while the link has room,
+`fast_room`, so a device in lockstep with its host never drops a sample for a slow host) and whenever the link
+received bytes, which it feeds and answers at once. A link with `pump()` and `wake_delay_s()`
+(`paced.PacedLink`, the link-rate option) is also pumped at each wake-up and wakes the runner when it can take
+more.
 
 Limits (a host that floods commands and never reads cannot grow the device): the runner's inbox holds at
 most `MAX_INBOX_BYTES` / `MAX_INBOX_CHUNKS`; bytes beyond are dropped and counted (`counters`
@@ -216,6 +218,8 @@ class LinkRunner:
                 self._flush()
             idle = self.core.next_due_us() is None
             return IDLE_WAIT_S if idle else (0.0 if self._fast_room() else 0.001)
+        if clock.fast:  # no host to pace a fast clock: wait for one (a connecting host wakes the thread)
+            return IDLE_WAIT_S
         due = self.core.next_due_us()
         return IDLE_WAIT_S if due is None else min(IDLE_WAIT_S, clock.wall_delay_s(due))
 

@@ -100,6 +100,8 @@ class OpenGazeDevice:
 
     def __init__(self, subject: Subject, clock: Clock, options: OpenGazeOptions | None = None) -> None:
         self.subject, self.clock = subject, clock
+        if hasattr(clock, "paused"):
+            subject.pause_clock = clock.paused  # a fast clock's time waits for the subject's exact solves
         self.options = o = options or OpenGazeOptions()
         scene = self.scene = subject.solver.scene
         self.eye_ids = tuple(0 if side == "right" else 1 for side in scene.sides)

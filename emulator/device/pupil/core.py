@@ -74,6 +74,7 @@ class DeviceThread:
         self._poller = zmq.Poller()
         self._poller.register(sub, zmq.POLLIN)
         self._stop = threading.Event()
+        self.stepped = threading.Condition()  # notified after every turn of the loop (PupilServer.wait_until)
         self._thread = threading.Thread(target=self._run, name="eyehil-zmq-publisher", daemon=True)
 
     def show(self, screen_mm: tuple[float, float], t_us: int) -> None:
@@ -95,6 +96,8 @@ class DeviceThread:
                 if self.gaze.due(self.clock.now_us()):
                     self._map()
                 self._publish(self.capture.poll())
+                with self.stepped:
+                    self.stepped.notify_all()
         except Exception as exc:  # a bug: the device stops, loudly, instead of hanging its clients
             self.failure = exc
             logging.getLogger(__name__).exception("the ZeroMQ device thread stopped")

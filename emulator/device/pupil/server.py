@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import time
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import zmq
@@ -88,6 +89,8 @@ class PupilServer:
     def __init__(self, subject: Subject, clock: Clock | None = None, options: ServerOptions | None = None) -> None:
         """Serve `subject` on `clock` (default real time) as `options` say; `start` binds."""
         self.subject, self.clock = subject, clock or RealTimeClock()
+        if hasattr(self.clock, "paused"):
+            subject.pause_clock = self.clock.paused  # a fast clock's time waits for the subject's exact solves
         self.options = options or ServerOptions()
         self.time = PupilTime(self.clock)
         self.port = self.pub_port = self.sub_port = 0
@@ -199,6 +202,14 @@ class PupilServer:
         device.start()
 
     # --- state and close --------------------------------------------------------------------------
+    def wait_until(self, condition: Callable[[], bool], timeout_s: float | None = None) -> bool:
+        """Wait until `condition()` (on what the device thread changes: `counters`, `annotations`, the outlet)
+        holds, re-checked after each turn of the device thread's loop (each batch of messages or exposures, at
+        least every `core.IDLE_S`); False at the timeout. For tests and tools: no polling with sleeps."""
+        stepped = self.device.stepped
+        with stepped:
+            return stepped.wait_for(condition, timeout_s)
+
     @property
     def counters(self) -> Counter[str]:
         """What the facade counted: requests, messages, exposures, drops (docs/zmq.md; 0 if never); any thread."""

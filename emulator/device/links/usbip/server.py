@@ -117,6 +117,11 @@ class UsbipCdcServer:
         with self._cond:
             return self._cond.wait_for(lambda: (self._session is not None) == attached, timeout)
 
+    def wait_counted(self, condition: Callable[[], bool], timeout: float | None = None) -> bool:
+        """Wait until `condition()` (on `connections_refused`, `imports_busy`) holds; False on timeout."""
+        with self._cond:
+            return self._cond.wait_for(condition, timeout)
+
     def send(self, data: bytes) -> int:
         """Queue bytes for the host's reads; returns how many were accepted (0 if no host is attached)."""
         with self._cond:
@@ -191,6 +196,7 @@ class UsbipCdcServer:
             self._connections = {t: c for t, c in self._connections.items() if t.is_alive()}
             if len(self._connections) >= MAX_CONNECTIONS:
                 self.connections_refused += 1
+                self._cond.notify_all()
                 conn.close()
                 return
             self._connections[thread] = conn
@@ -232,6 +238,7 @@ class UsbipCdcServer:
         if session is None:
             with self._cond:
                 self.imports_busy += 1
+                self._cond.notify_all()
             conn.sendall(encode_import_reply(None, OpStatus.DEV_BUSY))
             return
         try:
