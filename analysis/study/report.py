@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from eyehil.analysis.study import figures
+from eyehil.analysis.study.breakdown import COMPONENTS, GROUPS
 from eyehil.analysis.study.findings import all_findings
 from eyehil.analysis.study.published import CONFIGURATIONS, blignaut_real, fischer_simulated, guestrin_real_deg
 from eyehil.analysis.study.replication import StudyResult
@@ -30,8 +31,12 @@ def write_outputs(result: StudyResult, summary: dict[str, Any], out: Path,
     written += _figures(result, summary, out)
     if full is not None:
         written.append(_anatomy_figure(result, full, summary, out / "fig9_anatomy.png"))
-    (out / "report.md").write_text(render_markdown(summary, [p.name for p in written if p.suffix == ".png"]),
-                                   encoding="utf-8")
+    if "anatomy_breakdown" in summary:
+        written.append(figures.breakdown(summary["anatomy_breakdown"], COMPONENTS, GROUPS,
+                                         out / "fig10_anatomy_breakdown.png"))
+    pngs = [p.name for p in written if p.suffix == ".png"]
+    written += [figures.svg_of(p) for p in written if p.suffix == ".png"]
+    (out / "report.md").write_text(render_markdown(summary, pngs), encoding="utf-8")
     return [*written, out / "report.md"]
 
 
@@ -100,8 +105,10 @@ def _features_figure(result: StudyResult, path: Path) -> Path:
     q = result.eyes.anterior_conic
     pick = [int(np.argmin(q)), int(np.argmax(q))]
     f = simulate(result.eyes[pick], load_scene("blignaut2014"))
-    labels = [f"eye {i + 1} (Q_ac {q[i]:+.3f})" for i in pick]
-    return figures.features(f.pupil_centre_px[:, 0, 0], f.glint_px[:, 0, 0, :, 0, :], labels, path)
+    labels = [f"eye {i + 1} (Q_ac {figures.signed(float(q[i]))})" for i in pick]
+    title = (f"Fig. 3: image features of the right eye over the {f.pupil_centre_px.shape[3]} Blignaut targets, "
+             "for the eyes of most and least negative Q_ac")
+    return figures.features(f.pupil_centre_px[:, 0, 0], f.glint_px[:, 0, 0, :, 0, :], labels, path, title)
 
 
 def _row(*cells: Any) -> str:
@@ -142,6 +149,7 @@ def render_markdown(s: dict[str, Any], pngs: list[str]) -> str:
                           f"{g['real'][k]['mean']:.3f} +- {g['real'][k]['sd']:.3f}"))
     lines += _profiles_section(s)
     lines += _anatomy_section(s)
+    lines += _breakdown_section(s)
     lines += _blignaut_tables(s)
     lines += _sensitivity_table(s)
     lines += _univariate_table(s)
@@ -246,6 +254,59 @@ def _anatomy_section(s: dict[str, Any]) -> list[str]:
                           f"{f['mean'] - p['mean']:+.3f} / {f['sd'] - p['sd']:+.3f}",
                           ", ".join(p["significant"]) or "none", ", ".join(f["significant"]) or "none"))
     return lines
+
+
+def _breakdown_section(s: dict[str, Any]) -> list[str]:
+    b = s.get("anatomy_breakdown")
+    if not b:
+        return []
+    labels = list(COMPONENTS.values())
+    lines = ["", "## Which added anatomy moves the errors", "",
+             "The same eyes with each addition of the full anatomy alone (the deviates it has in the full run; "
+             "`eyehil.analysis.study.breakdown`). Change of the mean error from the paper anatomy (deg); the "
+             "interaction is what the additions do only together, so paper + the changes + interaction = full.", "",
+             _row("error", "paper mean", *(f"+ {c}" for c in labels), "interaction", "full mean", "moves it most"),
+             _row(*["---"] * (len(labels) + 5))]
+    for col, r in b.items():
+        lines.append(_row(col, f"{r['runs']['paper']['mean']:.3f}", *(f"{r['change'][c]:+.3f}" for c in COMPONENTS),
+                          f"{r['interaction']:+.3f}", f"{r['runs']['full']['mean']:.3f}",
+                          COMPONENTS[r["largest_change"]]))
+    lines += ["", "SD of the error over the eyes (deg), each addition alone:", "",
+              _row("error", "paper", *labels, "full"), _row(*["---"] * (len(labels) + 3))]
+    for col, r in b.items():
+        lines.append(_row(col, *(f"{r['runs'][k]['sd']:.3f}" for k in ("paper", *COMPONENTS, "full"))))
+    lines += ["", "Where the full anatomy's between-subject spread comes from: the share of the variance of each eye's "
+              "error explained by each group of per-eye parameters (the Shapley/LMG split of the R^2 of a linear "
+              "regression on the study's 11 parameters, the astigmatism J0, J45, |J| of both corneal surfaces and "
+              "the pupil's nasal, superior and total decentration; the shares sum to R^2). The elliptical stop and "
+              "the cornea tilt are the same in every eye: they move the mean but explain no spread.", "",
+              _row("error", "SD (full)", *(f"{g} (%)" for g in GROUPS), "unexplained (%)", "R^2", "eyes"),
+              _row(*["---"] * (len(GROUPS) + 5))]
+    for col, r in b.items():
+        v = r["variance"]
+        if "skipped" in v:
+            lines.append(_row(col, f"{r['runs']['full']['sd']:.3f}", *(["-"] * len(GROUPS)), "-", "-", v["skipped"]))
+            continue
+        lines.append(_row(col, f"{np.sqrt(v['variance']):.3f}", *(f"{100 * v['shares'][g]:.0f}" for g in GROUPS),
+                          f"{100 * v['unexplained']:.0f}", f"{v['r_squared']:.2f}", v["eyes"]))
+    lines += ["", _breakdown_sentence(b)]
+    return lines
+
+
+def _breakdown_sentence(b: dict[str, Any]) -> str:
+    """One sentence per kind of error: what moves the mean most and what explains most of the spread."""
+    parts = []
+    for col, r in b.items():
+        c = r["largest_change"]
+        text = f"{col}: {COMPONENTS[c]} moves the mean most ({r['change'][c]:+.3f} deg of {r['total_change']:+.3f})"
+        v = r["variance"]
+        if "shares" in v:
+            added = {g: v["shares"][g] for g in GROUPS if g != GROUPS[0]}
+            top = max(added, key=added.get)
+            text += (f"; of the spread, the paper anatomy explains {100 * v['shares'][GROUPS[0]]:.0f}%, {top} "
+                     f"{100 * added[top]:.0f}%")
+        parts.append(text)
+    return "In numbers: " + "; ".join(parts) + "."
 
 
 def _univariate_table(s: dict[str, Any]) -> list[str]:
