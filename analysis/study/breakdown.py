@@ -7,7 +7,8 @@ Two complementary answers, both per error category of `summary.anatomy_columns` 
    the deviates it has in the full run (`full_anatomy` draws all of them whatever is switched on). Per category:
    mean and SD alone, the change of the mean from the paper anatomy, and the interaction
    (full - paper) - sum over additions of (alone - paper), so paper + the changes + the interaction is the
-   full mean exactly (also per eye).
+   full mean exactly (also per eye). The addition with the largest change "moves it most"; a largest change
+   below `NEGLIGIBLE_DEG` is marked negligible.
 2. The share of the full run's between-subject variance that each group of per-eye parameters explains:
    the per-eye error regressed (OLS with an intercept) on `GROUPS`: the study's 11 parameters (the paper's
    anatomy), the astigmatism (anterior and posterior J0, J45 and their magnitudes |J| = hypot(J0, J45), D,
@@ -40,6 +41,8 @@ from eyehil.emulator.eye.population import study_parameters
 #: The additions of `full_anatomy`, by name: (keyword of `full_anatomy`, label for tables and figures).
 COMPONENTS: dict[str, str] = {"astigmatism": "astigmatism", "decentration": "pupil decentration",
                               "stop": "elliptical stop", "tilt": "cornea tilt"}
+#: A change of the mean below this (deg) is within the draw-to-draw spread of one draw of 100 eyes (docs/physics.md).
+NEGLIGIBLE_DEG = 0.005
 #: The regressor groups of the variance shares (module docstring), in the order of the tables.
 GROUPS = ("paper anatomy", "astigmatism", "pupil decentration")
 
@@ -151,6 +154,7 @@ def breakdown(paper: dict[str, np.ndarray], alone: dict[str, dict[str, np.ndarra
     out = {}
     for col in paper:
         changes = component_changes(paper[col], {c: alone[c][col] for c in alone}, full[col])
-        out[col] = changes | {"variance": variance_shares(full[col], parameters),
-                              "largest_change": max(changes["change"], key=lambda c: abs(changes["change"][c]))}
+        largest = max(changes["change"], key=lambda c: abs(changes["change"][c]))
+        out[col] = changes | {"variance": variance_shares(full[col], parameters), "largest_change": largest,
+                              "negligible": abs(changes["change"][largest]) < NEGLIGIBLE_DEG}
     return out

@@ -41,8 +41,8 @@ def svg_of(png: Path) -> Path:
     return png.with_suffix(".svg")
 
 
-def _save(fig: Figure, path: Path) -> Path:
-    fig.tight_layout()
+def _save(fig: Figure, path: Path, rect: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0)) -> Path:
+    fig.tight_layout(rect=rect)
     fig.savefig(path, dpi=DPI)
     fig.savefig(svg_of(path))
     return path
@@ -67,9 +67,10 @@ def table4(params: dict[str, np.ndarray], published: dict[str, list[float]], pat
     for ax, name in zip(axes.ravel(), names, strict=False):
         values = np.asarray(params[name], dtype=float)
         if np.ptp(values) <= 1e-9 * max(1.0, abs(float(values.mean()))):  # one value for every eye
-            ax.bar([values.mean()], [values.size], width=0.01 * max(abs(float(values.mean())), 1.0),
+            ax.bar([values.mean()], [values.size], width=0.002 * max(abs(float(values.mean())), 1.0),
                    color="#4c72b0", alpha=0.8)
-            ax.text(0.03, 0.95, f"{values.mean():.3f} in every eye", transform=ax.transAxes, va="top", fontsize=8)
+            ax.set_ylim(0, 1.3 * values.size)
+            ax.text(0.03, 0.97, f"{values.mean():.3f} in every eye", transform=ax.transAxes, va="top", fontsize=8)
         else:
             ax.hist(values, bins=15, color="#4c72b0", alpha=0.8, label="replicated eyes")
         if name in published:
@@ -86,9 +87,8 @@ def table4(params: dict[str, np.ndarray], published: dict[str, list[float]], pat
         ax.axis("off")
     handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.suptitle(f"Eye parameters of the {len(next(iter(params.values())))} simulated eyes (Table 4)")
-    fig.tight_layout(rect=(0, 0.04, 1, 1))
-    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8, frameon=False)
-    return _save(fig, path)
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=9, frameon=False)
+    return _save(fig, path, rect=(0, 0.035, 1, 1))
 
 
 def features(pupil: np.ndarray, glint: np.ndarray, labels: list[str], path: Path, title: str = "") -> Path:
@@ -144,10 +144,15 @@ def blignaut(best: dict[str, np.ndarray], real_best: dict[str, float], models: d
                 label="replicated mean (95% CI)")
     ax.plot(x, [real_best[c] for c in CONFIGURATIONS], "s-", color="#dd8452", label="real best function (mean)")
     ax.set_yscale("log")  # the replicated errors lie 10-30x below the real ones: a linear axis squashes them
+    low, high = ax.get_ylim()
+    ax.set_ylim(low, high * 2.5)  # room for the legend above the data
+    ticks = [t for t in (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0) if low <= t <= high * 2.5]
+    ax.set_yticks(ticks, [f"{t:g}" for t in ticks])
+    ax.minorticks_off()
     ax.set_xticks(x, [f"{c}\n(model {models[c]})" for c in CONFIGURATIONS])
     ax.set_ylabel("best-function error (deg, log scale)")
     ax.grid(True, which="major", axis="y", alpha=0.3)
-    ax.legend(fontsize=8, loc="lower left")
+    ax.legend(fontsize=8, loc="upper right")
     ax.set_title("Blignaut 2014: best-function error per calibration configuration")
     return _save(fig, path)
 
@@ -248,7 +253,7 @@ def breakdown(b: dict[str, Any], components: dict[str, str], groups: tuple[str, 
     (b) the share of the full anatomy's between-subject variance explained by each parameter group (%)."""
     cols = list(b)
     y = np.arange(len(cols))
-    fig, axes = _figure(1, 2, (13, 0.45 * len(cols) + 2.2))
+    fig, axes = _figure(1, 2, (13, 0.45 * len(cols) + 3.0))
     ax, bx = axes[0]
     names = [*components, "interaction"]
     height = 0.8 / len(names)
@@ -262,7 +267,7 @@ def breakdown(b: dict[str, Any], components: dict[str, str], groups: tuple[str, 
     ax.invert_yaxis()
     ax.set_xlabel("change of the mean error from the paper anatomy (deg)")
     ax.set_title("(a) each addition alone", fontsize=10)
-    ax.legend(fontsize=8, loc="lower right")
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=3, frameon=False)
     ax.grid(True, axis="x", alpha=0.3)
     left = np.zeros(len(cols))
     shade = {groups[0]: "#dd8452", groups[1]: "#c44e52", groups[2]: "#4c72b0"}
@@ -279,6 +284,6 @@ def breakdown(b: dict[str, Any], components: dict[str, str], groups: tuple[str, 
     bx.invert_yaxis()
     bx.set_xlabel("share of the between-subject variance, full anatomy (%)")
     bx.set_title("(b) where the spread comes from (Shapley split of R²)", fontsize=10)
-    bx.legend(fontsize=8, loc="lower right", framealpha=0.9)
+    bx.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=4, frameon=False)
     fig.suptitle("Which added anatomy moves the errors (the same eyes, --anatomy full)")
     return _save(fig, path)

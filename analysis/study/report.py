@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from eyehil.analysis.study import figures
-from eyehil.analysis.study.breakdown import COMPONENTS, GROUPS
+from eyehil.analysis.study.breakdown import COMPONENTS, GROUPS, NEGLIGIBLE_DEG
 from eyehil.analysis.study.findings import all_findings
 from eyehil.analysis.study.published import CONFIGURATIONS, blignaut_real, fischer_simulated, guestrin_real_deg
 from eyehil.analysis.study.replication import StudyResult
@@ -268,9 +268,10 @@ def _breakdown_section(s: dict[str, Any]) -> list[str]:
              _row("error", "paper mean", *(f"+ {c}" for c in labels), "interaction", "full mean", "moves it most"),
              _row(*["---"] * (len(labels) + 5))]
     for col, r in b.items():
-        lines.append(_row(col, f"{r['runs']['paper']['mean']:.3f}", *(f"{r['change'][c]:+.3f}" for c in COMPONENTS),
-                          f"{r['interaction']:+.3f}", f"{r['runs']['full']['mean']:.3f}",
-                          COMPONENTS[r["largest_change"]]))
+        most = f"none ({COMPONENTS[r['largest_change']]}: < {NEGLIGIBLE_DEG} deg)" if r["negligible"] else \
+            COMPONENTS[r["largest_change"]]
+        lines.append(_row(col, f"{r['runs']['paper']['mean']:.3f}", *(_change(r["change"][c]) for c in COMPONENTS),
+                          _change(r["interaction"]), f"{r['runs']['full']['mean']:.3f}", most))
     lines += ["", "SD of the error over the eyes (deg), each addition alone:", "",
               _row("error", "paper", *labels, "full"), _row(*["---"] * (len(labels) + 3))]
     for col, r in b.items():
@@ -289,24 +290,31 @@ def _breakdown_section(s: dict[str, Any]) -> list[str]:
             continue
         lines.append(_row(col, f"{np.sqrt(v['variance']):.3f}", *(f"{100 * v['shares'][g]:.0f}" for g in GROUPS),
                           f"{100 * v['unexplained']:.0f}", f"{v['r_squared']:.2f}", v["eyes"]))
-    lines += ["", _breakdown_sentence(b)]
+    lines += ["", "In words:", ""] + [_breakdown_sentence(col, r) for col, r in b.items()]
     return lines
 
 
-def _breakdown_sentence(b: dict[str, Any]) -> str:
-    """One sentence per kind of error: what moves the mean most and what explains most of the spread."""
-    parts = []
-    for col, r in b.items():
-        c = r["largest_change"]
-        text = f"{col}: {COMPONENTS[c]} moves the mean most ({r['change'][c]:+.3f} deg of {r['total_change']:+.3f})"
-        v = r["variance"]
-        if "shares" in v:
-            added = {g: v["shares"][g] for g in GROUPS if g != GROUPS[0]}
-            top = max(added, key=added.get)
-            text += (f"; of the spread, the paper anatomy explains {100 * v['shares'][GROUPS[0]]:.0f}%, {top} "
-                     f"{100 * added[top]:.0f}%")
-        parts.append(text)
-    return "In numbers: " + "; ".join(parts) + "."
+def _change(value: float) -> str:
+    """A change in deg with its sign, "0.000" when it rounds to zero (no "-0.000")."""
+    return "0.000" if round(value, 3) == 0 else f"{value:+.3f}"
+
+
+def _breakdown_sentence(col: str, r: dict[str, Any]) -> str:
+    """What moves the mean of one error category most and what explains most of its spread (a list item)."""
+    c = r["largest_change"]
+    if r["negligible"]:
+        text = (f"- {col}: no addition moves the mean by {NEGLIGIBLE_DEG} deg or more (full - paper "
+                f"{_change(r['total_change'])})")
+    else:
+        text = (f"- {col}: {COMPONENTS[c]} moves the mean most ({_change(r['change'][c])} deg of "
+                f"{_change(r['total_change'])} full - paper)")
+    v = r["variance"]
+    if "shares" in v:
+        added = {g: v["shares"][g] for g in GROUPS if g != GROUPS[0]}
+        top = max(added, key=added.get)
+        text += (f"; of its spread between subjects (SD {np.sqrt(v['variance']):.3f} deg) {top} explains "
+                 f"{100 * added[top]:.0f}%, the paper anatomy {100 * v['shares'][GROUPS[0]]:.0f}%")
+    return text + "."
 
 
 def _univariate_table(s: dict[str, Any]) -> list[str]:
