@@ -125,7 +125,7 @@ def test_the_breakdown_is_consistent_with_the_runs(breakdown_run) -> None:
 
 def test_the_breakdown_is_deterministic(breakdown_run) -> None:
     eyes, _, _, alone, _ = breakdown_run
-    again = run_study(component_eyes(eyes[:8], 2023)["decentration"], workers=1)
+    again = run_study(component_eyes(eyes, 2023)["decentration"][:8], workers=1)
     np.testing.assert_array_equal(again.h1, alone["decentration"].h1[:8])
 
 

@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
         result.settings["anatomy_seed"] = args.seed
         summary["anatomy"] = anatomy_summary(result, full)
         summary["anatomy_breakdown"] = anatomy_breakdown(result, alone, full)
-    written = write_outputs(result, summary, Path(args.out), full)
+    written = write_outputs(result, summary, Path(args.out), full, workers=args.workers)
     findings = all_findings(summary)
     held = sum(f.holds for f in findings)
     both = ", paper and full anatomy" if full is not None else ""

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib import rc_context
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 from scipy import stats as sps
@@ -44,7 +45,8 @@ def svg_of(png: Path) -> Path:
 def _save(fig: Figure, path: Path, rect: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0)) -> Path:
     fig.tight_layout(rect=rect)
     fig.savefig(path, dpi=DPI)
-    fig.savefig(svg_of(path))
+    with rc_context({"svg.fonttype": "none"}):  # text stays text (searchable, and 3x faster than paths)
+        fig.savefig(svg_of(path))
     return path
 
 

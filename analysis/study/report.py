@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import csv
 import json
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -14,26 +17,30 @@ from eyehil.analysis.study.breakdown import COMPONENTS, GROUPS, NEGLIGIBLE_DEG
 from eyehil.analysis.study.findings import all_findings
 from eyehil.analysis.study.published import CONFIGURATIONS, blignaut_real, fischer_simulated, guestrin_real_deg
 from eyehil.analysis.study.replication import StudyResult
+from eyehil.analysis.study.runner import default_workers
 from eyehil.analysis.study.summary import best_function_errors, error_columns
+from eyehil.emulator.eye.model import EyeModel
 from eyehil.emulator.eye.population import study_parameters
 from eyehil.emulator.forward import simulate
 from eyehil.emulator.scene import load_scene
 
 
 def write_outputs(result: StudyResult, summary: dict[str, Any], out: Path,
-                  full: StudyResult | None = None) -> list[Path]:
+                  full: StudyResult | None = None, workers: int | None = None) -> list[Path]:
     """Everything a run produces, in `out` (created); `full`: the same eyes with full anatomy (`--anatomy full`,
-    compared in `summary["anatomy"]` and fig. 9)."""
+    compared in `summary["anatomy"]` and fig. 9). The figures are drawn by `workers` processes (default one per
+    core; 1: in this process)."""
     out.mkdir(parents=True, exist_ok=True)
     written = [out / "summary.json", out / "per_eye.csv"]
     (out / "summary.json").write_text(json.dumps(summary, indent=1, default=_json) + "\n", encoding="utf-8")
     _per_eye_csv(result, out / "per_eye.csv")
-    written += _figures(result, summary, out)
+    jobs = _figures(result, summary, out)
     if full is not None:
-        written.append(_anatomy_figure(result, full, summary, out / "fig9_anatomy.png"))
+        jobs.append(partial(_anatomy_figure, result, full, summary, out / "fig9_anatomy.png"))
     if "anatomy_breakdown" in summary:
-        written.append(figures.breakdown(summary["anatomy_breakdown"], COMPONENTS, GROUPS,
-                                         out / "fig10_anatomy_breakdown.png"))
+        jobs.append(partial(figures.breakdown, summary["anatomy_breakdown"], COMPONENTS, GROUPS,
+                            out / "fig10_anatomy_breakdown.png"))
+    written += _draw(jobs, workers)
     pngs = [p.name for p in written if p.suffix == ".png"]
     written += [figures.svg_of(p) for p in written if p.suffix == ".png"]
     (out / "report.md").write_text(render_markdown(summary, pngs), encoding="utf-8")
@@ -56,7 +63,19 @@ def _per_eye_csv(result: StudyResult, path: Path) -> None:
             writer.writerow([i + 1, *(f"{columns[k][i]:.6g}" for k in columns)])
 
 
-def _figures(result: StudyResult, summary: dict[str, Any], out: Path) -> list[Path]:
+def _draw(jobs: list[partial], workers: int | None) -> list[Path]:
+    """Run the figure jobs (each writes one figure and returns its PNG path), in order; in a pool of forked
+    processes when more than one worker is available (each figure is independent: the wall time halves on two
+    cores), else here."""
+    workers = min(workers or default_workers(), len(jobs))
+    if workers <= 1 or "fork" not in multiprocessing.get_all_start_methods():
+        return [job() for job in jobs]
+    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork")) as pool:
+        futures = [pool.submit(job) for job in jobs]
+        return [f.result() for f in futures]
+
+
+def _figures(result: StudyResult, summary: dict[str, Any], out: Path) -> list[partial]:
     params = study_parameters(result.eyes)
     names = list(params)
     X = np.column_stack([params[k] for k in names])
@@ -66,28 +85,28 @@ def _figures(result: StudyResult, summary: dict[str, Any], out: Path) -> list[Pa
     table = {("ACD_from_anterior_cornea_mm" if k == "ACD_mm" else k): (v + params["CCT_mm"] if k == "ACD_mm" else v)
              for k, v in params.items()} | {"n_lens": result.eyes.lens_index}
     return [
-        figures.table4(table, fischer_simulated()["table4_parameter_distribution"], out / "table4.png"),
-        _features_figure(result, out / "fig3_features.png"),
-        figures.guestrin({"H1": result.h1, "H2": result.h2}, guestrin_real_deg(), fischer_simulated(),
-                         out / "fig4_guestrin.png"),
-        figures.sensitivity(X, names, {k: cols[k] for k in ("H1", "H2")}, summary["sensitivity"],
-                            out / "fig5_sensitivity_guestrin.png", "Guestrin: partial regression"),
-        figures.blignaut(best_function_errors(result.blignaut_errors), blignaut_real()["best_error"],
-                         {c: best[c]["model"] for c in CONFIGURATIONS}, out / "fig6_blignaut.png"),
-        figures.sensitivity(X, names, {k: cols[k] for k in CONFIGURATIONS}, summary["sensitivity"],
-                            out / "fig7_sensitivity_blignaut.png", "Blignaut: partial regression"),
+        partial(figures.table4, table, fischer_simulated()["table4_parameter_distribution"], out / "table4.png"),
+        partial(_features_figure, result.eyes, out / "fig3_features.png"),
+        partial(figures.guestrin, {"H1": result.h1, "H2": result.h2}, guestrin_real_deg(), fischer_simulated(),
+                out / "fig4_guestrin.png"),
+        partial(figures.sensitivity, X, names, {k: cols[k] for k in ("H1", "H2")}, summary["sensitivity"],
+                out / "fig5_sensitivity_guestrin.png", "Guestrin: partial regression"),
+        partial(figures.blignaut, best_function_errors(result.blignaut_errors), blignaut_real()["best_error"],
+                {c: best[c]["model"] for c in CONFIGURATIONS}, out / "fig6_blignaut.png"),
+        partial(figures.sensitivity, X, names, {k: cols[k] for k in CONFIGURATIONS}, summary["sensitivity"],
+                out / "fig7_sensitivity_blignaut.png", "Blignaut: partial regression"),
         *_profiles_figure(result, summary, out),
     ]
 
 
-def _profiles_figure(result: StudyResult, summary: dict[str, Any], out: Path) -> list[Path]:
+def _profiles_figure(result: StudyResult, summary: dict[str, Any], out: Path) -> list[partial]:
     compare = summary.get("guestrin_compare")
     if not compare:
         return []
     main = summary["guestrin"]["profile"]
     h1 = {main: result.profiles[main]["h1"], compare["profile"]: result.profiles[compare["profile"]]["h1"]}
     sens = {main: summary["sensitivity"], compare["profile"]: compare["sensitivity"]}
-    return [figures.profiles(h1, result.eyes.anterior_conic, sens, out / "fig8_estimator_profiles.png")]
+    return [partial(figures.profiles, h1, result.eyes.anterior_conic, sens, out / "fig8_estimator_profiles.png")]
 
 
 def _anatomy_figure(paper: StudyResult, full: StudyResult, summary: dict[str, Any], path: Path) -> Path:
@@ -100,11 +119,11 @@ def _anatomy_figure(paper: StudyResult, full: StudyResult, summary: dict[str, An
                            summary["anatomy"][column]["full"]["significant"], path, column)
 
 
-def _features_figure(result: StudyResult, path: Path) -> Path:
+def _features_figure(eyes: EyeModel, path: Path) -> Path:
     """Fig. 3 for the two eyes of most and least negative Q_ac (right eye, Blignaut scene)."""
-    q = result.eyes.anterior_conic
+    q = eyes.anterior_conic
     pick = [int(np.argmin(q)), int(np.argmax(q))]
-    f = simulate(result.eyes[pick], load_scene("blignaut2014"))
+    f = simulate(eyes[pick], load_scene("blignaut2014"))
     labels = [f"eye {i + 1} (Q_ac {figures.signed(float(q[i]))})" for i in pick]
     title = (f"Fig. 3: image features of the right eye over the {f.pupil_centre_px.shape[3]} Blignaut targets, "
              "for the eyes of most and least negative Q_ac")
