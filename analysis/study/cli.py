@@ -88,7 +88,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {col}: paper {r['paper']['mean']:.3f} +- {r['paper']['sd']:.3f}, full {r['full']['mean']:.3f} +- "
               f"{r['full']['sd']:.3f} deg; significant (full): {', '.join(r['full']['significant']) or 'none'}")
         b = summary["anatomy_breakdown"][col]
-        print(f"    moved most by {b['largest_change']} ({b['change'][b['largest_change']]:+.3f} deg alone)")
+        most, change = b["largest_change"], b["change"][b["largest_change"]]
+        print(f"    {'no addition moves it by 0.005 deg; largest' if b['negligible'] else 'moved most by'}: "
+              f"{most} ({change:+.3f} deg alone)")
     print(f"  published findings reproduced: {held} of {len(findings)} (see report.md)")
     for f in findings:
         if not f.holds:
