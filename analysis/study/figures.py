@@ -42,12 +42,23 @@ def svg_of(png: Path) -> Path:
     return png.with_suffix(".svg")
 
 
-def _save(fig: Figure, path: Path, rect: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0)) -> Path:
-    fig.tight_layout(rect=rect)
+def _save(fig: Figure, path: Path, rect: tuple[float, float, float, float] | None = (0.0, 0.0, 1.0, 1.0)) -> Path:
+    """Write the PNG and the SVG; `rect` is tight_layout's, None for a figure laid out already (`_grid_margins`:
+    the multi-panel figures, where tight_layout costs as much as drawing them)."""
+    if rect is not None:
+        fig.tight_layout(rect=rect)
     fig.savefig(path, dpi=DPI)
     with rc_context({"svg.fonttype": "none"}):  # text stays text (searchable, and 3x faster than paths)
         fig.savefig(svg_of(path))
     return path
+
+
+def _grid_margins(fig: Figure, top_in: float, bottom_in: float, left_in: float, hspace: float,
+                  wspace: float) -> None:
+    """Fixed margins in inches (top: suptitle and panel titles; bottom: x label; left: y label and ticks)."""
+    w, h = fig.get_size_inches()
+    fig.subplots_adjust(left=left_in / w, right=1 - 0.15 / w, top=1 - top_in / h, bottom=bottom_in / h,
+                        hspace=hspace, wspace=wspace)
 
 
 def signed(value: float, digits: int = 3) -> str:
@@ -90,7 +101,8 @@ def table4(params: dict[str, np.ndarray], published: dict[str, list[float]], pat
     handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.suptitle(f"Eye parameters of the {len(next(iter(params.values())))} simulated eyes (Table 4)")
     fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=9, frameon=False)
-    return _save(fig, path, rect=(0, 0.035, 1, 1))
+    _grid_margins(fig, top_in=0.55, bottom_in=0.8, left_in=0.6, hspace=0.42, wspace=0.3)
+    return _save(fig, path, rect=None)
 
 
 def features(pupil: np.ndarray, glint: np.ndarray, labels: list[str], path: Path, title: str = "") -> Path:
@@ -182,8 +194,11 @@ def sensitivity(X: np.ndarray, names: list[str], columns: dict[str, np.ndarray],
                      f"{pr.slope:+.3f} refit on the significant, R² = {sens[col]['r_squared']:.2f}", fontsize=8)
         ax.set_xlabel(f"{sig[0]} (z, partial)")
         ax.set_ylabel("error (deg, partial)")
+    for ax in axes.ravel()[len(columns):]:
+        ax.axis("off")
     fig.suptitle(title)
-    return _save(fig, path)
+    _grid_margins(fig, top_in=0.95, bottom_in=0.5, left_in=0.75, hspace=0.55, wspace=0.32)
+    return _save(fig, path, rect=None)
 
 
 def profiles(h1: dict[str, np.ndarray], q_ac: np.ndarray, sens: dict[str, dict[str, Any]], path: Path) -> Path:
