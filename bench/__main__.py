@@ -23,7 +23,7 @@ BENCHMARKS = [
     "discrepancy",  # the default eyehil discrepancy run (bench/discrepancy.py)
     "firmware",  # the firmware's C feature extractor (bench/firmware.py)
 ]
-ON_REQUEST = ["fuzz", "soak"]  # long runs (minutes to an hour): only when named
+ON_REQUEST = ["fuzz", "soak", "faults", "stimulus"]  # long runs, and the STIMULUS ACK latency alone
 
 
 def main() -> int:

@@ -33,7 +33,7 @@ def emulator(*extra: str):
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
     try:
         url = ""
-        deadline = time.monotonic() + 30.0
+        deadline = time.monotonic() + 120.0  # render workers import numpy, OpenCV and eyehil first
         while not url.startswith("url:") and time.monotonic() < deadline:
             url = proc.stdout.readline() or ("url:" if proc.poll() is not None else "")
         if proc.poll() is not None or not url.strip()[4:]:

@@ -6,8 +6,10 @@ reassembles the chunks (`eyehil.drivers.wire`) and counts the images delivered p
 device's STATUS `frames_dropped`. The fast clock lets the device run as fast as the link and host allow, but
 never slower than the wall clock: exposures the device cannot render and send within the frame interval of the
 configured rate are dropped, so the rate (`RATE_HZ`) is set below what the link carries. Then detection
-throughput: `eyehil.drivers.detect.detect_eye` on the received images, one core. Target (issue "Synthetic infrared
-frames"): hundreds (here >= `TARGET_FPS`) of 320 x 240 frames per second over a pty and TCP.
+throughput: `eyehil.drivers.detect.detect_eye` on the received images, one core. Targets (issue 16): >= 1,000
+frames/s over a pty and >= 2,000 over TCP, none dropped (`TARGET_FPS`). `CASES`: rendering on the device's
+thread or in one render process (`--render-workers 1`, rendering ahead of the link), and a pty paced to a
+full-speed USB device (`--link-rate usb-fs`: about 15 such images per second fit).
 """
 
 from __future__ import annotations
@@ -24,12 +26,21 @@ from eyehil.protocols.enums import StreamSelect
 LINKS = ("pty", "tcp")
 RATE_HZ = 100
 SECONDS = 2.0
-TARGET_FPS = 200.0
+TARGET_FPS = {"pty": 1000.0, "tcp": 2000.0}  # issue 16
+#: (label, link, extra `eyehil emulate` arguments); measured in turn within each repeat, so they share the load.
+CASES = (
+    ("pty", "pty", ()),
+    ("pty, 1 render process", "pty", ("--render-workers", "1")),
+    ("tcp", "tcp", ()),
+    ("tcp, 1 render process", "tcp", ("--render-workers", "1")),
+    ("pty at usb-fs (1.2 MB/s)", "pty", ("--link-rate", "usb-fs")),
+)
 
 
-def delivered(link: str, seconds: float = SECONDS) -> dict:
+def delivered(link: str, seconds: float = SECONDS, *extra: str) -> dict:
     """Images per second received over `link` (fast clock), the device's drops, and the images (for detection)."""
-    with emulator("--link", link, "--clock", "fast", "--rate", str(RATE_HZ)) as url, open_tracker(url) as tracker:
+    with (emulator("--link", link, "--clock", "fast", "--rate", str(RATE_HZ), *extra) as url,
+          open_tracker(url) as tracker):
         tracker.configure(stream=StreamSelect.FRAMES)
         tracker.start()
         wire, images = tracker.wire, []
@@ -66,25 +77,30 @@ def detection_fps(images: list, repeats: int) -> float:
 
 
 def run(repeats: int = 3) -> dict:
-    """Per link the best of `repeats` runs; detection on the images of the last TCP run."""
+    """Per case the best of `repeats` runs (cases interleaved); detection on the images of the last TCP run."""
     results: dict = {}
-    for link in LINKS:
-        runs = [delivered(link) for _ in range(repeats)]
-        results[link] = max(runs, key=lambda r: r["fps"])
-    images = results["tcp"].pop("images")[:300]
-    results["pty"].pop("images")
+    for _ in range(repeats):
+        for label, link, extra in CASES:
+            r = delivered(link, SECONDS, *extra)
+            if label not in results or r["fps"] > results[label]["fps"]:
+                results[label] = r
+    images = results["tcp"]["images"][:300]
     results["detect_fps"] = detection_fps(images, repeats)
     results["detected"] = len(images)
+    for label, _, _ in CASES:
+        results[label].pop("images")
     return results
 
 
 def report(results: dict) -> str:
     parts = []
-    for link in LINKS:
-        r = results[link]
-        verdict = "PASS" if r["fps"] >= TARGET_FPS else "FAIL"
-        parts.append(f"{link} {r['fps']:,.0f} frames/s ({r['mb_per_s']:.1f} MB/s; device dropped {r['dropped']} of "
-                     f"{r['sent'] + r['dropped']}; target >= {TARGET_FPS:,.0f}: {verdict})")
+    for label, link, extra in CASES:
+        r = results[label]
+        paced = "--link-rate" in extra
+        verdict = "" if paced else f"; target >= {TARGET_FPS[link]:,.0f}: " + (
+            "PASS" if r["fps"] >= TARGET_FPS[link] and r["dropped"] == 0 else "FAIL")
+        parts.append(f"{label} {r['fps']:,.0f} frames/s ({r['mb_per_s']:.1f} MB/s; device dropped {r['dropped']} of "
+                     f"{r['sent'] + r['dropped']}{verdict})")
     return (f"320x240 frames over links, device in its own process, fast clock at {RATE_HZ} Hz: " + "; ".join(parts)
             + f"; host detection {results['detect_fps']:,.0f} frames/s on one core ({results['detected']} images)")
 

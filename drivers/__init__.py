@@ -12,6 +12,17 @@
 - `view/`: the live web view (`eyehil view`; optional extra `view`), a host like any other.
 """
 
-from eyehil.drivers.client import Tracker, open_tracker
+from __future__ import annotations
+
+from typing import Any
 
 __all__ = ["Tracker", "open_tracker"]
+
+
+def __getattr__(name: str) -> Any:
+    """`Tracker` and `open_tracker`, imported on first use (so that `eyehil info --help` does not load numpy)."""
+    if name in __all__:
+        from eyehil.drivers import client
+
+        return getattr(client, name)
+    raise AttributeError(f"module 'eyehil.drivers' has no attribute {name!r}")

@@ -18,21 +18,22 @@ import sys
 from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import cv2
-import numpy as np
-
-from eyehil.drivers.calibration import METHODS, Plan, calibrate, gaze, grid, screen_to_stimulus
-from eyehil.drivers.client import Tracker, open_tracker
-from eyehil.drivers.errors import TrackerError
-from eyehil.drivers.frames import FrameReader, reader_for
-from eyehil.drivers.links import open_link
-from eyehil.drivers.links.fault import wrap
-from eyehil.drivers.recording import Recorder
-from eyehil.drivers.setup_file import load_geometry
 from eyehil.protocols.enums import Eye, EyeSelect, StreamSelect
 
+if TYPE_CHECKING:
+    import numpy as np
+
+    from eyehil.drivers.client import Tracker
+    from eyehil.drivers.frames import FrameReader
+
+# The parsers are built without numpy, scipy or OpenCV (`eyehil info --help` stays fast): the modules that need
+# them are imported inside the functions that run a subcommand.
+
 EYES = {"right": EyeSelect.RIGHT, "left": EyeSelect.LEFT, "both": EyeSelect.BOTH}
+#: `eyehil.drivers.calibration.METHODS`, repeated here so that the parser does not import the estimators (scipy)
+METHODS = ("guestrin", "blignaut")
 
 
 def _common() -> argparse.ArgumentParser:
@@ -98,6 +99,8 @@ def _reported(run: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Na
     """Print a `TrackerError` as one line on stderr and return 1 (the dispatcher handles ValueError)."""
     @functools.wraps(run)
     def wrapper(args: argparse.Namespace) -> int:
+        from eyehil.drivers.errors import TrackerError
+
         try:
             return run(args)
         except TrackerError as exc:
@@ -107,6 +110,10 @@ def _reported(run: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Na
 
 
 def _open(args: argparse.Namespace) -> Tracker:
+    from eyehil.drivers.client import Tracker, open_tracker
+    from eyehil.drivers.links import open_link
+    from eyehil.drivers.links.fault import wrap
+
     if not getattr(args, "fault", None):
         return open_tracker(args.url, timeout=args.timeout)
     link = wrap(open_link(args.url, timeout=0.0), args.fault)
@@ -132,6 +139,9 @@ def run_info(args: argparse.Namespace) -> int:
 
 def _start(tracker: Tracker, args: argparse.Namespace) -> Tracker | FrameReader:
     """CONFIGURE and START; return what to read samples from (the tracker, or a FrameReader with --frames)."""
+    from eyehil.drivers.frames import reader_for
+    from eyehil.drivers.setup_file import load_geometry
+
     frames = getattr(args, "frames", False)
     tracker.configure(rate_hz=args.rate, eyes=EYES[args.eyes] if args.eyes else None,
                       stream=StreamSelect.FRAMES if frames else StreamSelect.FEATURES)
@@ -172,6 +182,10 @@ def run_stream(args: argparse.Namespace) -> int:
 
 def _save(reader: Tracker | FrameReader, directory: str | None) -> None:
     """Write the images of the reader's last sample as DIR/frame_<frame id>_<eye>.png."""
+    import cv2
+
+    from eyehil.drivers.frames import FrameReader
+
     if not directory or not isinstance(reader, FrameReader):
         return
     Path(directory).mkdir(parents=True, exist_ok=True)
@@ -182,6 +196,10 @@ def _save(reader: Tracker | FrameReader, directory: str | None) -> None:
 
 @_reported
 def run_calibrate(args: argparse.Namespace) -> int:
+    from eyehil.drivers.calibration import Plan, calibrate
+    from eyehil.drivers.frames import reader_for
+    from eyehil.drivers.setup_file import load_geometry
+
     geometry = load_geometry(args.geometry).geometry
     with _open(args) as tracker:
         plan = Plan.default(geometry.screen, settle_s=args.settle, collect_s=args.collect)
@@ -199,6 +217,9 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
 def _stream_gaze(tracker: Tracker, result, seconds: float, reader: Tracker | FrameReader) -> None:
     """Stream gaze for `seconds` of device time (samples from `reader`), printing about ten estimates per second."""
+    from eyehil.drivers.calibration import gaze
+    from eyehil.drivers.frames import FrameReader
+
     if seconds <= 0:
         return
     tracker.start()
@@ -215,6 +236,8 @@ def _stream_gaze(tracker: Tracker, result, seconds: float, reader: Tracker | Fra
 
 @_reported
 def run_record(args: argparse.Namespace) -> int:
+    from eyehil.drivers.recording import Recorder
+
     with _open(args) as tracker:
         sync = tracker.sync_clock()
         _start(tracker, args)
@@ -240,6 +263,9 @@ def run_record(args: argparse.Namespace) -> int:
 
 def _targets(args: argparse.Namespace) -> np.ndarray | None:
     """STIMULUS positions (mm, top-left origin) of the --targets grid, or None."""
+    from eyehil.drivers.calibration import grid, screen_to_stimulus
+    from eyehil.drivers.setup_file import load_geometry
+
     if not args.targets:
         return None
     if not args.geometry:

@@ -8,13 +8,14 @@ from __future__ import annotations
 
 import argparse
 import time
+from typing import TYPE_CHECKING
 
-import numpy as np
+from eyehil.emulator.scene.presets_index import preset_names
 
-from eyehil.emulator.eye.media import Media
-from eyehil.emulator.features import Features
-from eyehil.emulator.forward import simulate
-from eyehil.emulator.scene import load_scene, preset_names
+if TYPE_CHECKING:
+    from eyehil.emulator.features import Features
+
+# The parser is built without numpy (`eyehil simulate --help` stays fast); `run` imports the forward model.
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -34,7 +35,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    from eyehil.emulator.eye.media import Media
     from eyehil.emulator.eye.select import eyes_from_spec
+    from eyehil.emulator.forward import simulate
+    from eyehil.emulator.scene import load_scene
 
     scene = load_scene(args.scene)
     eyes, about = eyes_from_spec(args.eyes, args.seed)
@@ -51,6 +55,8 @@ def run(args: argparse.Namespace) -> int:
 
 def summary(f: Features, about: str, seconds: float) -> str:
     """A readable report of a forward run."""
+    import numpy as np
+
     n = int(np.prod(f.shape))
     counts = f.counts()
     ok = f.valid

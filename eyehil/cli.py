@@ -6,11 +6,15 @@ The function `register(subparsers)` adds the subcommand's parser and sets `func`
 
 Errors end the command with one line on stderr: exit 2 for bad input (ValueError, a missing file), 1 for a
 runtime error (an OSError such as a port in use, or an eyehil, ZeroMQ or pyserial exception), 130 for Ctrl-C.
+Run as a command (`argv` None), Ctrl-C also freezes the heap (`gc.freeze`): the process is about to exit, and
+the interpreter's final collections over numpy, scipy, pandas and matplotlib took about 1 s of CPU (3 s on a
+busy machine) after the command had stopped.
 """
 
 from __future__ import annotations
 
 import argparse
+import gc
 import importlib
 import sys
 
@@ -57,6 +61,7 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    exits = argv is None  # the command line: the process ends when this returns
     argv = sys.argv[1:] if argv is None else argv
     parser = build_parser(argv)
     args = parser.parse_args(argv)
@@ -67,6 +72,8 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         print(f"eyehil {args.command}: interrupted", file=sys.stderr)
+        if exits:
+            gc.freeze()
         return 130
     except (ValueError, FileNotFoundError) as exc:  # bad input: a usage error
         print(f"eyehil {args.command}: error: {exc}", file=sys.stderr)

@@ -17,8 +17,8 @@ gets ``Malformed message: <reason>`` and is not forwarded (Pupil Capture would f
 Datums (image pixels with the origin at the top-left; Pupil's eye ids: 0 right, 1 left):
 ``pupil.<id>.2d`` {topic, id, method "2d c++", norm_pos (x / w, 1 - y / h), diameter (px, the major
 axis), confidence, timestamp (s, device clock), ellipse {center, axes (full lengths), angle (deg)},
-glints (our extra key)}; ``glint.<id>``; ``frame.eye.<id>`` {topic, width, height, index, timestamp,
-format} + one raw frame; notifications ``notify.<subject>`` {subject, topic, ...}; gaze
+glints (our extra key)}; ``glint.<id>``; ``frame.eye.<id>`` and ``frame.world`` {topic, width, height,
+index, timestamp, format} + one raw frame; notifications ``notify.<subject>`` {subject, topic, ...}; gaze
 ``gaze.2d.<eyes>.`` (note the trailing dot) {topic, norm_pos (on the screen), confidence, timestamp,
 base_data}.
 """
@@ -195,12 +195,13 @@ def glint_datum(eye_id: int, timestamp: float, glints: list[dict[str, Any]]) -> 
     return {"topic": f"glint.{eye_id}", "id": eye_id, "timestamp": float(timestamp), "glints": glints}
 
 
-def frame_datum(eye_id: int, index: int, timestamp: float, width: int, height: int, fmt: str,
+def frame_datum(eye_id: int | str, index: int, timestamp: float, width: int, height: int, fmt: str,
                 data: bytes) -> dict[str, Any]:
-    """A `frame.eye.<id>` message with its image as the raw frame."""
+    """A `frame.eye.<id>` message (`eye_id` "world": `frame.world`) with its image as the raw frame."""
     if fmt not in ("gray", "bgr", "jpeg"):
         raise PupilMessageError(f"frame format {fmt!r}: expected gray, bgr or jpeg")
-    return {"topic": f"frame.eye.{eye_id}", "width": int(width), "height": int(height), "index": int(index),
+    topic = "frame.world" if eye_id == "world" else f"frame.eye.{int(eye_id)}"
+    return {"topic": topic, "width": int(width), "height": int(height), "index": int(index),
             "timestamp": float(timestamp), "format": fmt, RAW: [data]}
 
 

@@ -23,6 +23,33 @@ def test_version_and_help_import_no_subcommand() -> None:
     assert version.stdout.startswith("eyehil ")
 
 
+HEAVY = ("numpy", "scipy", "cv2", "zmq", "matplotlib", "aiohttp")
+
+
+@pytest.mark.parametrize("command", sorted(cli.COMMANDS))
+def test_a_subcommands_help_imports_nothing_heavy(command: str) -> None:
+    """`eyehil CMD --help` builds CMD's parser (its module is imported) without numpy, scipy, OpenCV ...: the work's
+    modules are imported inside the functions that run it, so a subcommand starts in a fraction of a second."""
+    code = ("import sys, contextlib, io\nfrom eyehil import cli\n"
+            "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+            f"    try: cli.main([{command!r}, '--help'])\n    except SystemExit: pass\n"
+            f"assert out.getvalue().startswith('usage: eyehil {command}'), out.getvalue()\n"
+            f"print(sorted(m for m in {HEAVY!r} if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
+
+
+def test_the_parsers_copies_of_choices_match_their_sources() -> None:
+    """The parsers repeat two lists of choices so as not to import their (heavy) modules; they must agree."""
+    from eyehil.drivers import calibration
+    from eyehil.drivers import cli as host_cli
+    from eyehil.drivers.view import cli as view_cli
+    from eyehil.drivers.view import session
+
+    assert tuple(host_cli.METHODS) == tuple(calibration.METHODS)
+    assert tuple(view_cli.STREAMS) == tuple(session.STREAMS)
+
+
 def _fake_command(monkeypatch: pytest.MonkeyPatch, action) -> None:
     module = types.ModuleType("eyehil_test_fake_command")
 

@@ -89,11 +89,13 @@ class BarProgress:
 def run(args: argparse.Namespace) -> int:
     from eyehil.analysis.discrepancy.report import write_outputs
     from eyehil.analysis.discrepancy.workflow import run_discrepancy
+    from eyehil.analysis.output_folder import check_output_folder, staged_folder
     from eyehil.analysis.study.runner import default_workers
     from eyehil.emulator import effects as registry
     from eyehil.emulator.eye.select import eyes_from_spec
 
     _check(args)
+    out = check_output_folder(Path(args.out))
     names = [n.strip() for n in args.effects.split(",")] if args.effects else registry.names()
     excluded = [n.strip() for n in args.exclude.split(",")] if args.exclude else []
     for n in [*names, *excluded]:
@@ -109,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
                              effect_names=names, rounds=args.rounds, alpha=args.alpha, seed=args.seed,
                              workers=args.workers or default_workers(), progress=progress)
     progress.stage("writing the report and figure", 1)
-    written = write_outputs(result, Path(args.out))
+    with staged_folder(out) as partial:  # --out shows no file of an unfinished run
+        written = [out / p.relative_to(partial) for p in write_outputs(result, partial)]
     progress.advance(1)
     progress.close()
     _print(result, about, time.perf_counter() - start, written)

@@ -37,7 +37,6 @@ workflow blind (tests/test_discrepancy*.py, `eyehil discrepancy --hidden`).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
 from contextlib import nullcontext
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -48,6 +47,7 @@ from eyehil.analysis.discrepancy.data import Measured, MeasuredCondition
 from eyehil.analysis.discrepancy.metrics import Evaluator
 from eyehil.analysis.discrepancy.search import TOP, EffectFit, max_evaluations, search_effects
 from eyehil.analysis.discrepancy.stats import Comparison, compare, permutation_gof
+from eyehil.analysis.study.runner import worker_pool
 from eyehil.emulator import effects as registry
 from eyehil.emulator.effects import Applied, Effect
 from eyehil.emulator.eye.model import EyeModel
@@ -195,7 +195,7 @@ def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel
     """The whole workflow (module docstring); `search_eyes` defaults to `eyes`; `workers` > 1 evaluates the
     points of each search stage in that many processes; `progress` hears of every stage."""
     progress = progress or Silent()
-    with ProcessPoolExecutor(workers) if workers > 1 else nullcontext() as pool:
+    with worker_pool(workers) if workers > 1 else nullcontext() as pool:  # Ctrl-C: the workers stop at once
         progress.stage("simulating and calibrating the search eyes", 1)
         search = initial = Evaluator(measured.experiment, search_eyes if search_eyes is not None else eyes,
                                      seed=seed, pool=pool, workers=workers)

@@ -5,6 +5,9 @@ statistics and writes summary.json, per_eye.csv, report.md and figures into --ou
 same eyes run a second time with the anatomy the paper left out (`eyehil.emulator.eye.anatomy.full_anatomy`,
 drawn with --seed), and once more with each addition alone; the report compares the two per error category and
 breaks the change down by addition (`eyehil.analysis.study.breakdown`). It takes about six times as long.
+
+Ctrl-C stops the run at once (exit 130): the worker processes are terminated, and --out shows no file of an
+unfinished run (`eyehil.analysis.output_folder`).
 """
 
 from __future__ import annotations
@@ -45,6 +48,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    from eyehil.analysis.output_folder import check_output_folder, staged_folder
     from eyehil.analysis.study.findings import all_findings
     from eyehil.analysis.study.replication import run_study
     from eyehil.analysis.study.report import write_outputs
@@ -53,6 +57,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.workers is not None and args.workers < 1:
         raise ValueError("--workers must be >= 1")
+    out = check_output_folder(Path(args.out))
     eyes, about = eyes_from_spec(args.eyes, args.seed)
     if len(eyes) < 3:
         raise ValueError(f"--eyes {args.eyes}: the study's statistics need at least 3 eyes, got {len(eyes)}")
@@ -70,7 +75,9 @@ def run(args: argparse.Namespace) -> int:
         result.settings["anatomy_seed"] = args.seed
         summary["anatomy"] = anatomy_summary(result, full)
         summary["anatomy_breakdown"] = anatomy_breakdown(result, alone, full)
-    written = write_outputs(result, summary, Path(args.out), full, workers=args.workers)
+    with staged_folder(out) as partial:
+        written = [out / p.relative_to(partial)
+                   for p in write_outputs(result, summary, partial, full, workers=args.workers)]
     findings = all_findings(summary)
     held = sum(f.holds for f in findings)
     both = ", paper and full anatomy" if full is not None else ""

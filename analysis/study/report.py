@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
-import multiprocessing
-from concurrent.futures import ProcessPoolExecutor
+import signal
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -17,7 +16,7 @@ from eyehil.analysis.study.breakdown import COMPONENTS, GROUPS, NEGLIGIBLE_DEG
 from eyehil.analysis.study.findings import all_findings
 from eyehil.analysis.study.published import CONFIGURATIONS, blignaut_real, fischer_simulated, guestrin_real_deg
 from eyehil.analysis.study.replication import StudyResult
-from eyehil.analysis.study.runner import default_workers
+from eyehil.analysis.study.runner import default_workers, worker_pool
 from eyehil.analysis.study.summary import best_function_errors, error_columns
 from eyehil.emulator.eye.model import EyeModel
 from eyehil.emulator.eye.population import study_parameters
@@ -64,14 +63,18 @@ def _per_eye_csv(result: StudyResult, path: Path) -> None:
 
 
 def _draw(jobs: list[partial], workers: int | None) -> list[Path]:
-    """Run the figure jobs (each writes one figure and returns its PNG path), in order; in a pool of forked
+    """Run the figure jobs (each writes one figure and returns its PNG path), in order; in a pool of worker
     processes when more than one worker is available (each figure is independent: the wall time halves on two
-    cores), else here."""
+    cores), else here. The pool is `runner.worker_pool`'s: Ctrl-C stops it at once (its docstring)."""
     workers = min(workers or default_workers(), len(jobs))
-    if workers <= 1 or "fork" not in multiprocessing.get_all_start_methods():
+    if workers <= 1:
         return [job() for job in jobs]
-    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork")) as pool:
-        futures = [pool.submit(job) for job in jobs]
+    with worker_pool(workers) as pool:
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})  # no Ctrl-C while workers fork
+        try:
+            futures = [pool.submit(job) for job in jobs]
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
         return [f.result() for f in futures]
 
 

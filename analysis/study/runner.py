@@ -2,14 +2,25 @@
 
 Work is split into chunks of eyes; `run_chunks(func, chunks, ...)` returns the results in chunk order
 and tells `progress(n_eyes)` as chunks finish. `func` must be a module-level function (picklable).
+
+Ctrl-C (or any error) stops the work at once: the queued chunks are cancelled and the worker processes
+terminated, rather than waited for; the workers ignore SIGINT themselves (a terminal's Ctrl-C reaches the whole
+process group), so the main process alone decides and no worker prints a traceback. SIGINT is blocked while the
+workers are forked (`submit` forks them), so that none can see a Ctrl-C before it ignores it; a Ctrl-C in that
+moment waits, pending, and is delivered once the workers exist.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Sequence
+import signal
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from contextlib import contextmanager
 from typing import Any
+
+#: s to wait for each terminated worker to exit
+JOIN_TIMEOUT_S = 5.0
 
 
 def default_workers() -> int:
@@ -39,13 +50,46 @@ def run_chunks(
             tell(size)
         return out
     results: list[Any] = [None] * len(chunks)
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = {pool.submit(func, chunk, **kwargs): i for i, chunk in enumerate(chunks)}
+    with worker_pool(workers) as pool:
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            futures = {pool.submit(func, chunk, **kwargs): i for i, chunk in enumerate(chunks)}
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
         for future in as_completed(futures):
             i = futures[future]
             results[i] = future.result()
             tell(sizes[i])
     return results
+
+
+@contextmanager
+def worker_pool(workers: int) -> Iterator[ProcessPoolExecutor]:
+    """A process pool whose workers ignore Ctrl-C; if the block raises (Ctrl-C included) the pool is stopped at
+    once (`stop_pool`), otherwise shut down as usual (waiting for the work)."""
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=_ignore_sigint)
+    try:
+        yield pool
+    except BaseException:
+        stop_pool(pool)
+        raise
+    pool.shutdown()
+
+
+def _ignore_sigint() -> None:
+    """Worker initializer: Ctrl-C is the main process's to handle (it terminates the workers)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
+def stop_pool(pool: ProcessPoolExecutor) -> None:
+    """Cancel what is queued and terminate the workers now, instead of waiting for the running chunks."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())  # before shutdown forgets them
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.terminate()
+    for process in processes:
+        process.join(JOIN_TIMEOUT_S)
 
 
 def _run_dask(func, chunks, sizes, address: str, tell, kwargs) -> list[Any]:
@@ -58,8 +102,12 @@ def _run_dask(func, chunks, sizes, address: str, tell, kwargs) -> list[Any]:
         futures = [client.submit(func, chunk, pure=False, **kwargs) for chunk in chunks]
         index = {f.key: i for i, f in enumerate(futures)}
         results: list[Any] = [None] * len(chunks)
-        for future in dask_completed(futures):
-            i = index[future.key]
-            results[i] = future.result()
-            tell(sizes[i])
+        try:
+            for future in dask_completed(futures):
+                i = index[future.key]
+                results[i] = future.result()
+                tell(sizes[i])
+        except BaseException:  # Ctrl-C: the cluster stops this work too
+            client.cancel(futures)
+            raise
     return results

@@ -12,23 +12,42 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
+import os
 import signal
+import socket
 import threading
 import webbrowser
+from typing import TYPE_CHECKING
 
-from eyehil.drivers.errors import TrackerError
-from eyehil.drivers.setup_file import load_geometry
-from eyehil.drivers.view.server import ViewServer, wait_closed
-from eyehil.drivers.view.session import STREAMS
+if TYPE_CHECKING:
+    from eyehil.drivers.view.server import ViewServer
 
 DEFAULT_PORT = 8765
+#: the keys of `eyehil.drivers.view.session.STREAMS`, repeated so that the parser imports neither numpy nor OpenCV
+STREAMS = ("features", "both", "frames", "detect")
+
+
+class ViewListenError(OSError):
+    """The page could not listen on its address; the message names the address and the reason."""
+
+
+def port_number(text: str) -> int:
+    """argparse type of the page's port: a TCP port, 0..65535 (0: any free port)."""
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a port number") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"{port} is not a TCP port (0..65535, 0 = any free port)")
+    return port
 
 
 def add_view_options(p: argparse.ArgumentParser, prefix: str = "") -> None:
     """The page's options (`prefix` "view-" for ``eyehil emulate``, whose --host/--port mean the device's)."""
     p.add_argument(f"--{prefix}host", dest="view_host", default="127.0.0.1",
                    help="address the page binds (default 127.0.0.1, loopback)")
-    p.add_argument(f"--{prefix}port", dest="view_port", type=int, default=DEFAULT_PORT,
+    p.add_argument(f"--{prefix}port", dest="view_port", type=port_number, default=DEFAULT_PORT,
                    help=f"port of the page (default {DEFAULT_PORT}; 0 = any free port)")
     p.add_argument("--open", dest="view_open", action="store_true", help="open the page in the system browser")
     p.add_argument(f"--{prefix}stream", dest="view_stream", choices=[*STREAMS, "auto"], default="auto",
@@ -56,6 +75,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def start_view(url: str, args: argparse.Namespace, geometry_path: str | None, **session_options) -> ViewServer:
     """Start the page server on `url` with the options of `add_view_options`; print its address (and open it)."""
+    from eyehil.drivers.setup_file import load_geometry
+    from eyehil.drivers.view.server import ViewServer
+
     recorder = None
     if args.record_video:
         from eyehil.drivers.view.video import VideoRecorder
@@ -66,12 +88,21 @@ def start_view(url: str, args: argparse.Namespace, geometry_path: str | None, **
                         recorder=recorder, **session_options)
     try:
         server.start()
-    except OSError as exc:
-        raise ValueError(f"cannot serve the page on {args.view_host}:{args.view_port}: {exc}") from exc
+    except OSError as exc:  # one line naming the address (exit 1), not aiohttp's "error while attempting to bind"
+        reason = _bind_reason(exc)
+        raise ViewListenError(f"cannot listen on view http {args.view_host}:{args.view_port}: "
+                              f"{reason[:1].lower()}{reason[1:]}") from exc
     print(f"view: {server.address}", flush=True)
     if args.view_open:
         webbrowser.open(server.address)
     return server
+
+
+def _bind_reason(exc: OSError) -> str:
+    """Why a bind failed, in the system's words (aiohttp puts the address into `strerror` too)."""
+    if not isinstance(exc, socket.gaierror) and exc.errno in errno.errorcode:
+        return os.strerror(exc.errno)
+    return exc.strerror or str(exc)
 
 
 def close_view(server: ViewServer) -> None:
@@ -83,6 +114,9 @@ def close_view(server: ViewServer) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from eyehil.drivers.errors import TrackerError
+    from eyehil.drivers.view.server import wait_closed
+
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:

@@ -4,8 +4,10 @@
   (`feed`), bytes out (`poll`, `read_available`), no I/O, no threads;
 - `subject.Subject`, `gaze` (scripts: fixations, saccades, pursuits, blinks), `solver` (exact and
   interpolated features from `eyehil.emulator.forward`; `SolveQueue`: coalesced solves off the
-  device thread), `appearance` (the outlines a renderer needs), `camera`
-  (exposures, detection flags), `clock`; `frames` and `frame_stream` (rendered images as FRAME_CHUNKs);
+  device thread), `solve_process` (those solves in a worker process, off the device's GIL), `appearance`
+  (the outlines a renderer needs), `camera`
+  (exposures, detection flags), `clock`; `frames` and `frame_stream` (rendered images as FRAME_CHUNKs),
+  `render_pool` (images rendered off the device's thread: worker processes or threads);
 - `stimulus`: the STIMULUS side channel, the emulator's stand-in for the screen (one coordinate conversion);
 - `links/`: the device side of pty, TCP, USB/IP and the in-process loop;
 - `pupil/`: the Pupil Capture facade (ZeroMQ Pupil Core Network API); `lsl`: the LSL outlet;

@@ -9,6 +9,8 @@ appearance channels (`appearance.AppearanceSolver`), and the image noise comes f
 with `seed`, the frame id and the eye (`frames.exposure_rng`).
 
 URL form (loop://, and `--option` values): ``scene=blignaut2014&eyes=published&eye=3&clock=fast&rate=500``.
+``link_rate=usb-fs`` paces a native link (pty, tcp, usbip) to a real link's byte rate (`links.paced`);
+``render_workers=2`` renders frames in two processes ahead of the link (`render_pool`).
 """
 
 from __future__ import annotations
@@ -23,7 +25,10 @@ from eyehil.emulator.device.clock import make_clock
 from eyehil.emulator.device.frame_stream import FrameOptions
 from eyehil.emulator.device.gaze import Blink, Fixation, Pursuit, Segment
 from eyehil.emulator.device.iscan import IscanTracker
-from eyehil.emulator.device.solver import FeatureSolver, tracked_scene
+from eyehil.emulator.device.links.paced import parse_link_rate
+from eyehil.emulator.device.render_pool import MAX_RENDER_WORKERS
+from eyehil.emulator.device.solve_process import ProcessSolves
+from eyehil.emulator.device.solver import FeatureSolver, InThreadSolves, tracked_scene
 from eyehil.emulator.device.subject import Behaviour, Subject
 from eyehil.emulator.device.tracker import VirtualTracker
 from eyehil.emulator.eye.select import eyes_from_spec
@@ -46,14 +51,23 @@ class DeviceOptions:
     rate_hz: int = 250  # default rate (native) or the fixed rate (ISCAN)
     clock: str = "real"  # or "fast"
     speed: float = 1.0  # real clock: device seconds per wall second
+    link_rate: str = ""  # pace the native link's output, e.g. "12Mbit", "115200baud", "usb-fs" ("": unpaced)
+    render_workers: int = 0  # frames: render in this many processes, ahead of the link (0: on the device's thread)
+    solves: str = "auto"  # where fixation solves run: "process", "thread"; auto: process on the real clock
 
     def __post_init__(self) -> None:
+        if self.link_rate:
+            parse_link_rate(self.link_rate)  # raises ValueError with the accepted forms
+        if not 0 <= self.render_workers <= MAX_RENDER_WORKERS:
+            raise ValueError(f"render_workers must be in 0..{MAX_RENDER_WORKERS}, got {self.render_workers}")
         if self.script not in ("stimulus", "demo"):
             raise ValueError(f"script must be 'stimulus' or 'demo', got {self.script!r}")
         if self.sides not in ("", "right", "left", "both"):
             raise ValueError(f"sides must be 'right', 'left' or 'both', got {self.sides!r}")
         if self.mode not in ("native", "iscan"):
             raise ValueError(f"mode must be 'native' or 'iscan', got {self.mode!r}")
+        if self.solves not in ("auto", "process", "thread"):
+            raise ValueError(f"solves must be 'auto', 'process' or 'thread', got {self.solves!r}")
 
 
 def demo_script(scene: Scene) -> list[Segment]:
@@ -79,7 +93,10 @@ def build_subject(options: DeviceOptions, appearance: bool = True) -> Subject:
     """The simulated subject of `options`; with `appearance`, its observations also carry what frames are drawn
     from (`appearance.AppearanceSolver`). On the real clock the subject never waits for a solve (fixations of new
     targets are interpolated until solved); on the fast clock, whose time is virtual, it waits for the exact one
-    (at most `FAST_CLOCK_SOLVE_WAIT_S`)."""
+    (at most `FAST_CLOCK_SOLVE_WAIT_S`). The solves of new targets run in a worker process on the real clock (they
+    would otherwise hold the GIL the streaming thread needs: `solve_process`) and on a thread of this process on
+    the fast clock, whose device waits for them anyway (a process would only add its start-up); `options.solves`
+    overrides."""
     scene = load_scene(options.scene)
     if options.sides:
         scene = tracked_scene(scene, ("right", "left") if options.sides == "both" else (options.sides,))
@@ -89,8 +106,9 @@ def build_subject(options: DeviceOptions, appearance: bool = True) -> Subject:
     solver = (AppearanceSolver if appearance else FeatureSolver)(eyes[options.eye], scene, options.head)
     script = demo_script(scene) if options.script == "demo" else None
     wait_s = FAST_CLOCK_SOLVE_WAIT_S if options.clock == "fast" else 0.0
+    where = options.solves if options.solves != "auto" else "thread" if options.clock == "fast" else "process"
     return Subject(solver, options.behaviour, rng=np.random.default_rng(options.seed), script=script,
-                   exact_wait_s=wait_s)
+                   exact_wait_s=wait_s, solves=ProcessSolves if where == "process" else InThreadSolves)
 
 
 def build_device(options: DeviceOptions | None = None) -> VirtualTracker | IscanTracker:
@@ -100,7 +118,17 @@ def build_device(options: DeviceOptions | None = None) -> VirtualTracker | Iscan
     subject = build_subject(options, appearance=options.mode == "native")
     if options.mode == "iscan":
         return IscanTracker(subject, clock, rate_hz=options.rate_hz)
-    return VirtualTracker(subject, clock, default_rate_hz=options.rate_hz, frames=FrameOptions(seed=options.seed))
+    return VirtualTracker(subject, clock, default_rate_hz=options.rate_hz,
+                          frames=FrameOptions(seed=options.seed, workers=options.render_workers))
+
+
+def paced(link, options: DeviceOptions, clock):
+    """`link` paced to `options.link_rate` on the device's `clock` (`links.paced.PacedLink`), or `link` itself."""
+    if not options.link_rate:
+        return link
+    from eyehil.emulator.device.links.paced import PacedLink
+
+    return PacedLink(link, parse_link_rate(options.link_rate), clock)
 
 
 _HEAD_KEYS = ("x", "y", "z", "yaw", "pitch", "roll")

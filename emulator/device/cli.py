@@ -3,6 +3,7 @@
     eyehil emulate --link pty                       # prints the pseudo-terminal's path; open it as a serial port
     eyehil emulate --link tcp --port 5555           # pyserial socket://127.0.0.1:5555
     eyehil emulate --link pty --mode iscan --rate 120
+    eyehil emulate --link pty --link-rate usb-fs    # output paced to a full-speed USB CDC device (1.2 MB/s)
     eyehil emulate --link zmq [--port 50020] [--lsl]   # Pupil Core Network API (+ an LSL outlet), docs/zmq.md
     eyehil emulate --link opengaze [--port 4242] [--gaze-method guestrin]   # Gazepoint Open Gaze API, docs/opengaze.md
     eyehil emulate --scene blignaut2014 --write-geometry blignaut.toml   # the host's setup file
@@ -18,10 +19,15 @@ import contextlib
 import importlib
 import signal
 import threading
+from typing import TYPE_CHECKING
 
-from eyehil.emulator.device.build import DeviceOptions, build_device, options_from_query
-from eyehil.emulator.device.links.base import LinkRunner
-from eyehil.emulator.scene import preset_names
+from eyehil.emulator.scene.presets_index import preset_names
+
+if TYPE_CHECKING:
+    from eyehil.emulator.device.build import DeviceOptions
+
+# The parser is built without numpy, scipy or OpenCV (`eyehil emulate --help` stays fast): the device's modules
+# are imported inside the functions that run it.
 
 #: link name -> "module:class"; the class takes (host, port) keywords where they mean something.
 LINKS: dict[str, str] = {
@@ -36,7 +42,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--link", choices=sorted([*LINKS, "zmq", "opengaze"]), default="pty", help="transport (default pty)")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (tcp, usbip; default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=0, help="port (tcp default: any free port; usbip default 3240)")
+    p.add_argument("--port", type=port_number, default=0, help="port (tcp default: any free port; usbip default 3240)")
     p.add_argument("--scene", default="guestrin2006", help=f"preset ({', '.join(preset_names())}) or TOML path")
     p.add_argument("--eyes", default="normative:navarro", help="published | sample:N | normative:NAME")
     p.add_argument("--eye", type=int, default=0, help="which eye of --eyes (default 0)")
@@ -48,6 +54,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rate", type=int, help="default sample rate, Hz (ISCAN: the rate; default 250, opengaze 60)")
     p.add_argument("--clock", choices=["real", "fast"], default="real", help="real time or as fast as possible")
     p.add_argument("--speed", type=float, default=1.0, help="real clock: device seconds per wall second")
+    p.add_argument("--link-rate", default="", metavar="RATE",
+                   help="pace pty/tcp/usbip output to a real link: 12Mbit, 1MB, 115200baud, usb-fs, usb-hs "
+                        "(docs/frames.md; default unpaced)")
+    p.add_argument("--render-workers", type=int, default=0, metavar="N",
+                   help="frames: render in N processes ahead of the link (default 0: on the device's thread)")
     p.add_argument("--behaviour", default="", help="e.g. 'latency=0.2,jitter=0.05,blinks=0.3' (s, deg, Hz)")
     p.add_argument("--write-geometry", metavar="FILE", help="write the host's tracker geometry (TOML) for the scene")
     p.add_argument("--lsl", action="store_true", help="zmq: also open an LSL outlet of type Gaze (needs pylsl)")
@@ -58,18 +69,33 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="opengaze: the gaze estimator calibrated (default: by the scene's LEDs)")
     p.add_argument("--duration", type=float, help="stop after this many seconds (default: until interrupted)")
     p.add_argument("--view", action="store_true", help="also serve the live web view (eyehil view) of this device")
-    p.add_argument("--view-port", type=int, default=8765, help="--view: port of the page (default 8765; 0 = any)")
+    p.add_argument("--view-port", type=port_number, default=8765,
+                   help="--view: port of the page (default 8765; 0 = any)")
     p.add_argument("--view-open", action="store_true", help="--view: open the page in the system browser")
     p.add_argument("--record-video", metavar="FILE", help="--view: also write the eye images (.mp4 or .png)")
     p.set_defaults(func=run)
 
 
+def port_number(text: str) -> int:
+    """argparse type of --port and --view-port: a TCP port, 0..65535 (0: any free port)."""
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a port number") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"{port} is not a TCP port (0..65535, 0 = any free port)")
+    return port
+
+
 def options(args: argparse.Namespace) -> DeviceOptions:
     """`DeviceOptions` from the command line."""
+    from eyehil.emulator.device.build import DeviceOptions, options_from_query
+
     base = DeviceOptions(scene=args.scene, eyes=args.eyes, eye=args.eye, sides=args.sides or "", seed=args.seed,
                          script=args.script,
                          mode=args.mode, rate_hz=args.rate or (60 if args.link == "opengaze" else 250),
-                         clock=args.clock, speed=args.speed)
+                         clock=args.clock, speed=args.speed, link_rate=args.link_rate,
+                         render_workers=args.render_workers)
     query = "&".join(part for part in (args.head, args.behaviour) if part).replace(",", "&")
     return options_from_query(query, base)
 
@@ -88,6 +114,11 @@ def make_link(kind: str, host: str, port: int):
 
 def make_runner(opts: DeviceOptions, args: argparse.Namespace):
     """A `LinkRunner` on the chosen link or, for ``--link zmq``, the Pupil Core facade (imported only then)."""
+    from eyehil.emulator.device.build import build_device, paced
+    from eyehil.emulator.device.links.base import LinkRunner
+
+    if opts.link_rate and args.link in ("zmq", "opengaze"):
+        raise ValueError("--link-rate paces the native links (pty, tcp, usbip)")
     if args.link == "zmq":
         from eyehil.emulator.device.pupil.server import server_for
 
@@ -101,7 +132,12 @@ def make_runner(opts: DeviceOptions, args: argparse.Namespace):
         return opengaze_server(opts, args.host, args.port or 4242, method=args.gaze_method)
     if args.lsl:
         raise ValueError("--lsl needs --link zmq")
-    return LinkRunner(build_device(opts), make_link(args.link, args.host, args.port))
+    core = build_device(opts)
+    try:
+        return LinkRunner(core, paced(make_link(args.link, args.host, args.port), opts, core.clock))
+    except BaseException:
+        core.close()
+        raise
 
 
 class ViewBlink:
@@ -114,10 +150,9 @@ class ViewBlink:
     def __init__(self, core) -> None:
         self.core = core
 
-    def blink(self, duration_s: float) -> None:
-        """Close the eyes for `duration_s` seconds, starting in `LEAD_US`."""
-        start = self.core.clock.now_us() + self.LEAD_US
-        self.core.subject.blinks._intervals.append((start, start + round(duration_s * 1e6)))
+    def blink(self, duration_s: float) -> bool:
+        """Close the eyes for `duration_s` seconds, starting in `LEAD_US`; False if too many are pending."""
+        return self.core.subject.blink(self.core.clock.now_us() + self.LEAD_US, duration_s)
 
 
 def _view_starter(args: argparse.Namespace):

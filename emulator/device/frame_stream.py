@@ -17,20 +17,31 @@ exposure due while the previous exposure's chunks still wait, those of all but t
 at one poll (the device renders at most one exposure per poll, so rendering never makes it fall behind
 its clock), those of exposures skipped for the FEATURES limit, and those abandoned by STOP. `sent`
 (`frames_sent`) counts images whose last chunk was released.
+
+Rendering ahead (`FrameOptions.workers` > 0): images are rendered by a `render_pool.RenderPool` of that many
+processes while the link carries the previous ones. At most `FrameOptions.ahead` exposures are in flight
+(rendering, rendered, or with chunks waiting); the newest exposures of a poll take the free places and the
+others' images are dropped and counted, as are images whose rendering failed. Chunks still leave in exposure
+order and under the same budget. With ``workers=0`` the device renders on its own thread, one exposure in flight.
+`room` tells a fast clock whether it may take another exposure (`VirtualTracker.fast_room`).
 """
 
 from __future__ import annotations
 
+import logging
 from collections import deque
+from collections.abc import Callable
+from concurrent.futures import Future, wait
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from eyehil.emulator.device.appearance import AppearanceSolver, closed
 from eyehil.emulator.device.camera import Exposures, Selection
-from eyehil.emulator.device.frames import ExposureRenderer, exposure_rng, render_exposure, render_region
+from eyehil.emulator.device.frames import ExposureRenderer
+from eyehil.emulator.device.render_pool import RenderJob, RenderPool
 from eyehil.emulator.device.subject import Subject
-from eyehil.emulator.render.renderer import DEFAULT_ROI, Frame, RenderSettings
+from eyehil.emulator.render.renderer import DEFAULT_ROI, RenderSettings
 from eyehil.protocols.enums import Eye
 from eyehil.protocols.images import split_image
 from eyehil.protocols.native import encode
@@ -47,6 +58,13 @@ class FrameOptions:
     crop_px: tuple[int, int] = DEFAULT_ROI
     settings: RenderSettings = field(default_factory=RenderSettings)
     budget_bytes: int = 256 * 1024
+    workers: int = 0  # render processes (0: render on the device's thread)
+    ahead: int = 4  # with workers: exposures in flight at most (rendering, rendered, or chunks waiting)
+    kind: str = "process"  # render workers: "process" or "thread" (`render_pool`)
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.ahead <= 64 or self.workers < 0 or self.budget_bytes < 1:
+            raise ValueError("frame options: ahead must be in 1..64, workers >= 0, budget_bytes >= 1")
 
 
 class FrameStream:
@@ -56,9 +74,14 @@ class FrameStream:
                  ) -> None:
         """Draw with `renderer`; `tracked`: the subject's eyes in the order of its channels."""
         self.renderer, self.tracked, self.options = renderer, tracked, options or FrameOptions()
-        self.sent = self.dropped = 0
+        self.sent = self.dropped = self.render_failures = 0
+        self.on_done: Callable[[], None] | None = None  # called from a pool thread when an image is rendered
+        self._pool = RenderPool(renderer, self.options.workers, self.options.kind, on_done=self._done)  # start now
         self._sel: Selection | None = None
-        self._queue: deque[tuple[FrameChunk, int]] = deque()  # chunks not yet released, with their timestamp
+        self._ahead: deque[tuple[int, int, list[tuple[Eye, Future]]]] = deque()  # (frame id, time, images)
+        self._queue: deque[tuple[FrameChunk, int, bool]] = deque()  # chunks not yet released: timestamp, last of
+        # its exposure
+        self._queued_exposures = 0  # exposures with chunks in `_queue`
         self._open: dict[Eye, np.ndarray] = {}  # each eye's last row with open eyes (drawn shut in blinks)
         self._downstream = 0
 
@@ -73,20 +96,51 @@ class FrameStream:
 
     @property
     def pending(self) -> bool:
-        """Chunks wait to be released."""
-        return bool(self._queue)
+        """Images are rendering or chunks wait to be released."""
+        return bool(self._queue or self._ahead)
+
+    @property
+    def capacity(self) -> int:
+        """Exposures that may be in flight."""
+        return self.options.ahead if self.options.workers else 1
+
+    @property
+    def room(self) -> int:
+        """Exposures that may still start (rendering ahead)."""
+        return max(0, self.capacity - len(self._ahead) - self._queued_exposures)
 
     def start(self, selection: Selection) -> None:
         """A stream of `selection` begins."""
         self._sel = selection
         self._queue.clear()
+        self._ahead.clear()
+        self._queued_exposures = 0
         self._open.clear()
+
+    def _done(self) -> None:
+        if self.on_done is not None:
+            self.on_done()
 
     def stop(self) -> None:
         """The stream ends: images not wholly released are abandoned."""
-        self.dropped += sum(c.chunk_index == c.chunk_count - 1 for c, _ in self._queue)
+        self.dropped += sum(c.chunk_index == c.chunk_count - 1 for c, _, _ in self._queue)
+        for _, _, images in self._ahead:
+            for _, future in images:
+                future.cancel()
+            self.dropped += len(images)
         self._queue.clear()
+        self._ahead.clear()
+        self._queued_exposures = 0
         self._sel = None
+
+    def wait_rendered(self, timeout: float | None = None) -> bool:
+        """Wait until every image in flight is rendered (tests, tools); True if they all are."""
+        futures = [f for _, _, images in self._ahead for _, f in images]
+        return not wait(futures, timeout=timeout).not_done
+
+    def close(self) -> None:
+        """Stop the render workers; idempotent."""
+        self._pool.close()
 
     def _per_exposure(self) -> int:
         return 0 if self._sel is None else len(self._sel.eyes) if self._sel.roi is None else 1
@@ -100,31 +154,45 @@ class FrameStream:
         self._downstream = backlog
 
     def offer(self, exposures: Exposures) -> None:
-        """The exposures just taken: render the newest if no chunk is waiting; drop the other images."""
+        """The exposures just taken: start the newest as far as there is room; drop the other images."""
         if self._sel is None or len(exposures) == 0:
             return
-        start = not self._queue
+        start = min(self.room, len(exposures)) if self.options.workers else int(self.room > 0)
         self.dropped += (len(exposures) - start) * self._per_exposure()
-        if start:
-            self._render(int(exposures.batch.frame_id[-1]), int(exposures.time_us[-1]), exposures.values[-1],
-                         bool(exposures.blink[-1]))
+        for k in range(len(exposures) - start, len(exposures)):
+            self._submit(int(exposures.batch.frame_id[k]), int(exposures.time_us[k]), exposures.values[k],
+                         bool(exposures.blink[k]))
+        self._collect()
 
-    def _render(self, frame_id: int, time_us: int, values: np.ndarray, blink: bool) -> None:
-        """Queue the chunks of the images of one exposure (`values` (E', C) of the tracked eyes)."""
-        sel, seed = self._sel, self.options.seed
+    def _submit(self, frame_id: int, time_us: int, values: np.ndarray, blink: bool) -> None:
+        """Start rendering the images of one exposure (`values` (E', C) of the tracked eyes)."""
+        sel, seed, pool = self._sel, self.options.seed, self._pool
         rows = np.stack([self._row(eye, values, blink) for eye in sel.eyes])
-        images: list[tuple[Eye, Frame]] = []
         if sel.roi is None:
-            for i, eye in enumerate(sel.eyes):
-                frame = render_exposure(self.renderer, rows, i, exposure_rng(seed, frame_id, eye), leds=sel.leds,
-                                        size=self.options.crop_px)
-                images.append((eye, frame))
+            jobs = [(eye, RenderJob(frame_id, int(eye), rows, seed, sel.leds, eye_index=i, size=self.options.crop_px))
+                    for i, eye in enumerate(sel.eyes)]
         else:
-            rng = exposure_rng(seed, frame_id, Eye.BOTH)
-            images.append((Eye.BOTH, render_region(self.renderer, rows, tuple(range(len(rows))), sel.roi, rng,
-                                                   leds=sel.leds)))
-        for eye, frame in images:
-            self._queue.extend((c, time_us) for c in split_image(frame_id, eye, frame.image, frame.roi_xy))
+            jobs = [(Eye.BOTH, RenderJob(frame_id, int(Eye.BOTH), rows, seed, sel.leds, region=sel.roi,
+                                         eye_indices=tuple(range(len(rows)))))]
+        self._ahead.append((frame_id, time_us, [(eye, pool.submit(job)) for eye, job in jobs]))
+
+    def _collect(self) -> None:
+        """Move the chunks of rendered exposures, oldest first, to the release queue (in exposure order)."""
+        while self._ahead and all(f.done() for _, f in self._ahead[0][2]):
+            frame_id, time_us, images = self._ahead.popleft()
+            chunks: list[FrameChunk] = []
+            for eye, future in images:
+                try:
+                    rendered = future.result()
+                except Exception:  # a worker died or the image failed: dropped, counted, the stream goes on
+                    self.render_failures += 1
+                    self.dropped += 1
+                    logging.getLogger(__name__).exception("frame %d of eye %s not rendered", frame_id, eye)
+                    continue
+                chunks += split_image(frame_id, eye, rendered.image, rendered.roi_xy)
+            if chunks:
+                self._queue.extend((c, time_us, k == len(chunks) - 1) for k, c in enumerate(chunks))
+                self._queued_exposures += 1
 
     def _row(self, eye: Eye, values: np.ndarray, blink: bool) -> np.ndarray:
         """What to draw of `eye`: its channels, or during a blink its last open row with the lids shut."""
@@ -140,11 +208,13 @@ class FrameStream:
     def release(self, queued: int, seq: int) -> tuple[bytes, int]:
         """Encode waiting chunks, numbered from `seq`, while the bytes downstream (plus `queued`, the core's output
         not yet read) stay under the budget; return the bytes and how many chunks they hold."""
+        self._collect()
         out, n = bytearray(), 0
         while self._queue and self._downstream + queued + len(out) < self.options.budget_bytes:
-            chunk, time_us = self._queue.popleft()
+            chunk, time_us, last = self._queue.popleft()
             out += encode(chunk, (seq + n) % U32, time_us)
             n += 1
             self.sent += chunk.chunk_index == chunk.chunk_count - 1
+            self._queued_exposures -= last
         self._downstream += len(out)
         return bytes(out), n

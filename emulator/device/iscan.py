@@ -63,8 +63,8 @@ class IscanTracker:
     def connection_reset(self) -> None:
         """Nothing to forget: ISCAN commands are single bytes."""
 
-    def next_due_us(self, count: int = 1) -> int | None:
-        """Device time by which the next `count` records are due, or None when stopped."""
+    def next_due_us(self, count: int = 1, wake: bool = True) -> int | None:
+        """Device time by which the next `count` records are due, or None when stopped (`wake`: no early look)."""
         return self.camera.time_of(self.camera.taken + count - 1) if self.streaming else None
 
     def poll(self, now_us: int | None = None, backlog: int = 0) -> int:

@@ -62,7 +62,7 @@ def eyehil_options(request: pytest.FixtureRequest):
 @pytest.fixture
 def eyehil_emulator(request: pytest.FixtureRequest, eyehil_options) -> Iterator:
     """A running emulator (`eyehil.emulator.device.links.base.LinkRunner`), closed after the test."""
-    from eyehil.emulator.device.build import build_device
+    from eyehil.emulator.device.build import build_device, paced
     from eyehil.emulator.device.links.base import LinkRunner
 
     kind = _marker_options(request).get("link", request.config.getoption("eyehil_link"))
@@ -74,7 +74,7 @@ def eyehil_emulator(request: pytest.FixtureRequest, eyehil_options) -> Iterator:
         raise pytest.UsageError(f"eyehil marker: link must be 'pty' or 'tcp', got {kind!r}")
     core = build_device(eyehil_options)
     try:
-        runner = LinkRunner(core, Link()).start()
+        runner = LinkRunner(core, paced(Link(), eyehil_options, core.clock)).start()
     except BaseException:
         core.close()
         raise

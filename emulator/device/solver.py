@@ -6,10 +6,13 @@ cached per point in a bounded LRU cache of `MAX_CACHED_POINTS`) and interpolates
 (saccades, pursuits, fixational jitter) bilinearly in a grid of exact solutions over the screen
 (`FeatureField`, built once, lazily).
 
-`SolveQueue` runs the exact solves of new fixation targets on one worker thread ("eyehil-solver"),
-coalesced: while one solve runs, only the latest requested point waits (older requests are replaced and
-counted), so a host sending a thousand targets costs at most two solves, never a queue. The device's
-thread never waits for it unless asked to (`Subject`'s `exact_wait_s`): it reads `cached` and
+`SolveQueue` runs the exact solves of new fixation targets (and the grid, if it is not built yet) from one
+worker thread ("eyehil-solver"), coalesced: while one solve runs, only the latest requested point waits
+(older requests are replaced and counted), so a host sending a thousand targets costs at most two solves,
+never a queue. The thread hands each solve to a `SolveBackend`: `InThreadSolves` computes it right there
+(the solve then holds the GIL, competing with the device's own thread), `solve_process.ProcessSolves` in a
+worker process that got the solver once (the device's process only waits on a pipe). The device's thread
+never waits for either unless asked to (`Subject`'s `exact_wait_s`): it reads `cached` and
 `field_if_ready`, which return at once.
 
 Feature vector per eye (the "channels", image px, OpenCV convention; NaN = not computable):
@@ -28,7 +31,9 @@ from __future__ import annotations
 import logging
 import threading
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import replace
+from typing import Protocol
 
 import numpy as np
 
@@ -75,6 +80,17 @@ class FeatureSolver:
         self._field: FeatureField | None = None
         self._field_lock = threading.Lock()
 
+    _LOCAL = ("_cache", "_lock", "_field", "_field_lock")  # state that stays in this process
+
+    def __getstate__(self) -> dict:
+        """What a worker process needs to solve (anatomy, scene, head, settings): no cache, grid or locks."""
+        return {k: v for k, v in self.__dict__.items() if k not in self._LOCAL}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._cache, self._lock = OrderedDict(), threading.Lock()
+        self._field, self._field_lock = None, threading.Lock()
+
     def world(self, xy: np.ndarray) -> np.ndarray:
         """Scene points (N, 3) mm of screen points (N, 2) mm."""
         xy = np.asarray(xy, float).reshape(-1, 2)
@@ -101,11 +117,12 @@ class FeatureSolver:
         if missing:
             solved = self.solve(np.array(missing))
             known.update(zip(missing, solved, strict=True))
-            self._store(dict(zip(missing, solved, strict=True)))
+            self.store(dict(zip(missing, solved, strict=True)))
         return np.stack([known[k] for k in keys]) if keys else np.empty((0, self.n_eyes, self.n_channels))
 
-    def _store(self, solved: dict[tuple[float, float], np.ndarray]) -> None:
-        """Add solutions to the cache, evicting the least recently used beyond `max_cached`."""
+    def store(self, solved: dict[tuple[float, float], np.ndarray]) -> None:
+        """Add exact solutions (E, C) by `point_key` to the cache, evicting the least recently used beyond
+        `max_cached`."""
         with self._lock:
             for key, value in solved.items():
                 self._cache[key] = value
@@ -148,6 +165,12 @@ class FeatureSolver:
                 self._field = FeatureField.build(self)
             return self._field
 
+    def install_field(self, field: FeatureField) -> None:
+        """Use `field` as the interpolation grid unless one is built already (it came from a `SolveBackend`)."""
+        with self._field_lock:
+            if self._field is None:
+                self._field = field
+
     def interpolate(self, xy: np.ndarray) -> np.ndarray:
         """Interpolated features (N, E, C) of gaze points (N, 2) screen mm."""
         return self.field(np.asarray(xy, float).reshape(-1, 2))
@@ -158,16 +181,44 @@ def point_key(xy) -> tuple[float, float]:
     return round(float(xy[0]), 6), round(float(xy[1]), 6)
 
 
+class SolveBackend(Protocol):
+    """Where `SolveQueue`'s thread has its exact solves computed (module docstring)."""
+
+    def solve(self, xy: np.ndarray) -> np.ndarray:
+        """Exact features (N, E, C) of gaze points (N, 2) screen mm, as `FeatureSolver.solve`; blocks until done."""
+        ...
+
+    def close(self) -> None:
+        """Release what the backend holds; a `solve` under way returns or raises soon after. Idempotent."""
+        ...
+
+
+class InThreadSolves:
+    """A `SolveBackend` that solves in the calling thread (`FeatureSolver.solve`, holding the GIL meanwhile)."""
+
+    def __init__(self, solver: FeatureSolver) -> None:
+        self.solver = solver
+
+    def solve(self, xy: np.ndarray) -> np.ndarray:
+        return self.solver.solve(xy)
+
+    def close(self) -> None:
+        """Nothing to release (a solve under way finishes first)."""
+
+
 class SolveQueue:
-    """Exact solves of fixation targets on one worker thread, coalesced; see the module docstring.
+    """Exact solves of fixation targets from one worker thread, coalesced; see the module docstring.
 
     Counters: ``requested``, ``coalesced`` (requests replaced by a newer one before their solve started),
     ``solved``, ``failed`` (a solve raised: logged, the point stays interpolated).
     """
 
-    def __init__(self, solver: FeatureSolver) -> None:
-        """Start the worker; its first job is the interpolation grid."""
+    def __init__(self, solver: FeatureSolver,
+                 backend: Callable[[FeatureSolver], SolveBackend] = InThreadSolves) -> None:
+        """Start the worker thread, which solves through `backend(solver)` (made here: it must be cheap, e.g.
+        start its process on its first solve, which runs on the worker thread); its first job is the grid."""
         self.solver = solver
+        self.backend = backend(solver)
         self._cond = threading.Condition()
         self._next: tuple[float, float] | None = None  # the latest point waiting for the worker
         self._running: tuple[float, float] | None = None  # the point being solved now
@@ -208,10 +259,12 @@ class SolveQueue:
             return self._cond.wait_for(done, timeout_s)
 
     def _run(self) -> None:
-        try:
-            self.solver.field  # noqa: B018 - the grid first: every movement and every unsolved fixation needs it
+        try:  # the grid first: every movement and every unsolved fixation needs it
+            if self.solver.field_if_ready() is None:
+                self.solver.install_field(FeatureField.build(self.solver, self.backend.solve))
         except Exception:  # a bug in the forward model: logged; the device keeps streaming what it can
-            logging.getLogger(__name__).exception("interpolation grid failed")
+            if not self._closing:
+                logging.getLogger(__name__).exception("interpolation grid failed")
         with self._cond:
             self._cond.notify_all()
         while True:
@@ -221,20 +274,23 @@ class SolveQueue:
                     return
                 self._running, self._next = self._next, None
             try:
-                self.solver.exact(np.array([self._running]))
+                self.solver.store({self._running: self.backend.solve(np.array([self._running]))[0]})
                 self.solved += 1
-            except Exception:  # as above
-                self.failed += 1
-                logging.getLogger(__name__).exception("fixation solve failed at %s", self._running)
+            except Exception:  # as above (or the backend was closed under it)
+                if not self._closing:
+                    self.failed += 1
+                    logging.getLogger(__name__).exception("fixation solve failed at %s", self._running)
             with self._cond:
                 self._running = None
                 self._cond.notify_all()
 
     def close(self) -> None:
-        """Stop the worker (a solve under way finishes first); idempotent."""
+        """Stop the worker thread and close the backend (a solve under way in this process finishes first; one
+        in a worker process is abandoned); idempotent."""
         with self._cond:
             self._closing = True
             self._cond.notify_all()
+        self.backend.close()
         if self._thread is not threading.current_thread():
             self._thread.join()
 
@@ -247,13 +303,14 @@ class FeatureField:
         self.xs, self.ys, self.values = xs, ys, values
 
     @classmethod
-    def build(cls, solver: FeatureSolver) -> FeatureField:
-        """Solve the grid of `solver`'s screen (enlarged by its margin) in one forward-model call."""
+    def build(cls, solver: FeatureSolver, solve: Callable[[np.ndarray], np.ndarray] | None = None) -> FeatureField:
+        """Solve the grid of `solver`'s screen (enlarged by its margin) in one call of `solve` (default
+        `solver.solve`: one forward-model call)."""
         half = np.array(solver.scene.screen.size) * (0.5 + solver.margin)
         n = np.maximum(2, np.ceil(2 * half / solver.spacing).astype(int) + 1)
         xs, ys = np.linspace(-half[0], half[0], n[0]), np.linspace(-half[1], half[1], n[1])
         gx, gy = np.meshgrid(xs, ys)
-        values = solver.solve(np.column_stack([gx.ravel(), gy.ravel()]))
+        values = (solve or solver.solve)(np.column_stack([gx.ravel(), gy.ravel()]))
         return cls(xs, ys, values.reshape(len(ys), len(xs), *values.shape[1:]))
 
     def __call__(self, xy: np.ndarray) -> np.ndarray:

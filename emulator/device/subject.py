@@ -7,7 +7,8 @@ gaze script (`eyehil.emulator.device.gaze`, repeated by default) or follows the 
 until told otherwise. `observe(times)` returns the image features at exposure times:
 
 - fixating: the exact forward-model solution for the fixated point (solved once per point, ahead of
-  time on a worker thread when a stimulus arrives: `solver.SolveQueue`, coalesced), plus optional
+  time when a stimulus arrives: `solver.SolveQueue`, coalesced, by default in a worker process:
+  `solve_process.ProcessSolves`), plus optional
   fixational jitter (white noise of `jitter_deg` on the gaze direction, applied through the
   interpolation grid's local slope); while the exact solve of a new point is still running, the point is
   interpolated in the grid (counted in `interpolated_holds`);
@@ -40,7 +41,8 @@ from eyehil.emulator.device.gaze import (
     plan,
     position_ok,
 )
-from eyehil.emulator.device.solver import FeatureSolver, SolveQueue, point_key
+from eyehil.emulator.device.solve_process import ProcessSolves
+from eyehil.emulator.device.solver import FeatureSolver, SolveBackend, SolveQueue, point_key
 
 
 @dataclass(frozen=True)
@@ -87,15 +89,29 @@ class BlinkProcess:
             closed |= (times_us >= start) & (times_us < stop)
         return closed
 
+    MAX_PENDING = 64  # requested closures held at once (a page hammering its blink button cannot grow the list)
+
+    def close(self, start_us: int, duration_s: float) -> bool:
+        """Close the eyes from `start_us` (device clock, us) for `duration_s` s (0 < duration <= 5 s), besides the
+        spontaneous blinks; False (nothing added) if `MAX_PENDING` closures are already pending."""
+        if not 0.0 < duration_s <= 5.0:
+            raise ValueError(f"blink duration {duration_s} s not in (0, 5]")
+        if len(self._intervals) >= self.MAX_PENDING:
+            return False
+        self._intervals.append((int(start_us), int(start_us) + round(duration_s * 1e6)))
+        return True
+
 
 class Subject:
     """A subject with one eye anatomy (both eyes alike), a head pose and a behaviour; see the module docstring."""
 
     def __init__(self, solver: FeatureSolver, behaviour: Behaviour | None = None, *,
                  rng: np.random.Generator | None = None, script: list[Segment] | None = None,
-                 repeat: bool = True, start: tuple[float, float] = (0.0, 0.0), exact_wait_s: float = 0.0) -> None:
+                 repeat: bool = True, start: tuple[float, float] = (0.0, 0.0), exact_wait_s: float = 0.0,
+                 solves: Callable[[FeatureSolver], SolveBackend] = ProcessSolves) -> None:
         """Follow `script` (repeated if `repeat`) or, without one, fixate `start` until a stimulus comes;
-        `exact_wait_s`: how long `observe` may wait for a solve (0: never)."""
+        `exact_wait_s`: how long `observe` may wait for a solve (0: never); `solves`: where the solves of new
+        targets run (`solver.SolveBackend`: a worker process by default, `solver.InThreadSolves` in this one)."""
         self.solver = solver
         self.behaviour = behaviour or Behaviour()
         self.rng = rng or np.random.default_rng(0)
@@ -104,6 +120,7 @@ class Subject:
         self.script, self.repeat = script, repeat
         self.exact_wait_s = exact_wait_s
         self.pause_clock: Callable[[], AbstractContextManager] = nullcontext  # the device clock's `paused`, if any
+        self.solves = solves
         self._solves: SolveQueue | None = None
         self.targets_refused = 0  # look_at targets ignored (not finite, too far)
         self.interpolated_holds = 0  # fixation samples interpolated because their exact solve was still running
@@ -118,6 +135,10 @@ class Subject:
             solver.exact(np.array([start]))  # where the subject looks until the first stimulus
             if exact_wait_s == 0:
                 solver.field  # noqa: B018 - never waiting later: the grid must be there before the first stimulus
+
+    def blink(self, start_us: int, duration_s: float) -> bool:
+        """Close the eyes at `start_us` (device clock, us) for `duration_s` s; see `BlinkProcess.close`."""
+        return self.blinks.close(start_us, duration_s)
 
     @property
     def screen_centre(self) -> np.ndarray:
@@ -156,14 +177,14 @@ class Subject:
         if self.solver.has_exact(xy) and self.solver.field_if_ready() is not None:
             return
         if self._solves is None:
-            self._solves = SolveQueue(self.solver)
+            self._solves = SolveQueue(self.solver, self.solves)
         self._solves.request(xy)
 
     def _interpolate(self, xy: np.ndarray) -> np.ndarray | None:
         """Interpolated features (N, E, C), or None if the grid is not built yet (waits `exact_wait_s` at most)."""
         if self.solver.field_if_ready() is None:
             if self._solves is None:  # nobody is building it: a subject that never got a stimulus
-                self._solves = SolveQueue(self.solver)
+                self._solves = SolveQueue(self.solver, self.solves)
             if self.exact_wait_s > 0:
                 with self.pause_clock():
                     self._solves.wait(None, self.exact_wait_s)
@@ -228,7 +249,7 @@ class Subject:
         return values
 
     def close(self) -> None:
-        """Stop the worker thread (a solve under way finishes first)."""
+        """Stop the solves' worker thread and process (`SolveQueue.close`)."""
         if self._solves is not None:
             self._solves.close()
             self._solves = None

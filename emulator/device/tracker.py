@@ -13,7 +13,8 @@ sleeps or starts a thread; the core is not thread-safe (a link runner serialises
 - Frames (if the subject's solver carries appearance channels): each exposure's images as FRAME_CHUNKs
   behind the FEATURES (`frame_stream`; dropped images counted in `frames_dropped`). The FEATURES limit
   grows by the frame budget, which the link's backlog may hold in chunks. With frames, `next_due_us` asks
-  for one exposure at a time (a fast clock never outruns the images) and for an early look while chunks wait.
+  for one exposure at a time (a fast clock never outruns the images) and for an early look while images
+  render or chunks wait; `fast_room` tells a fast clock's runner when the next exposure may start.
 - A new connection (`connection_reset`) starts a fresh session: IDLE, default configuration, nothing queued.
 - STIMULUS moves the simulated subject's target (`eyehil.emulator.device.stimulus`); it never waits for the
   subject's fixation solve (`eyehil.emulator.device.subject`), so its ACK is immediate.
@@ -28,7 +29,7 @@ import numpy as np
 from eyehil.emulator.device.camera import Camera, Selection
 from eyehil.emulator.device.clock import Clock, RealTimeClock
 from eyehil.emulator.device.frame_stream import FrameOptions, FrameStream
-from eyehil.emulator.device.links.base import take
+from eyehil.emulator.device.links.base import FAST_LOW_WATER, take
 from eyehil.emulator.device.stimulus import stimulus_problem, stimulus_to_screen
 from eyehil.emulator.device.subject import Subject
 from eyehil.protocols.batch import pack_features_batch
@@ -210,14 +211,29 @@ class VirtualTracker:
     def _with_frames(self) -> bool:
         return self.frames is not None and StreamSelect.FRAMES in self._stream
 
-    def next_due_us(self, count: int = 1) -> int | None:
-        """Device time by which the next `count` samples are due (one with frames; sooner while chunks wait), or
-        None when idle."""
+    def next_due_us(self, count: int = 1, wake: bool = True) -> int | None:
+        """Device time by which the next `count` samples are due (one with frames; with `wake`, sooner while images
+        render or chunks wait), or None when idle."""
         if self.state is not DeviceState.STREAMING:
             return None
         count = 1 if self._with_frames else count
         due = self.camera.time_of(self.camera.taken + count - 1)
-        return min(due, self.clock.now_us() + PENDING_WAKE_US) if self._with_frames and self.frames.pending else due
+        early = wake and self._with_frames and self.frames.pending
+        return min(due, self.clock.now_us() + PENDING_WAKE_US) if early else due
+
+    def fast_room(self, backlog: int) -> bool:
+        """Fast clock: may the runner take the next exposure now, with `backlog` bytes in the link? FEATURES only:
+        while the link holds less than `FAST_LOW_WATER`. With frames: while an exposure may start rendering
+        (`frame_stream.FrameStream.room`) and the link holds less than the frame budget, so the next image renders
+        while the link carries the previous ones; both bounds are fixed, so the backlog stays bounded."""
+        if self.state is not DeviceState.STREAMING or not self._with_frames:
+            return backlog < FAST_LOW_WATER
+        return self.frames.room > 0 and backlog < self.frames.options.budget_bytes
+
+    def set_wake(self, wake) -> None:
+        """`wake()` is called (from another thread) when an image finishes rendering: the runner looks again."""
+        if self.frames is not None:
+            self.frames.on_done = wake
 
     def poll(self, now_us: int | None = None, backlog: int = 0) -> int:
         """Queue the samples due by `now_us` (default: the clock); return how many exposures were taken.
@@ -277,5 +293,7 @@ class VirtualTracker:
         return take(self._out, max_bytes)
 
     def close(self) -> None:
-        """Release the subject's worker thread."""
+        """Release the subject's worker thread and the render workers."""
+        if self.frames is not None:
+            self.frames.close()
         self.subject.close()

@@ -13,7 +13,11 @@ pupil centred on it. `full_anatomy` keeps every published parameter of the eyes 
   33:634-641, 10 right eyes); its movement with pupil size drawn from N(-0.01 +- 0.02, -0.04 +- 0.05) mm per
   mm of diameter increase (the same study: the centre moves nasally and up on constriction), and the eye's
   own pupil is placed accordingly: decentre = decentre_4mm + shift * (diameter - 4 mm). The two components
-  are drawn independently (no covariance is published).
+  are drawn independently (no covariance is published). Checked on 2026-12-02 against the same group's
+  meeting abstract (Invest Ophthalmol Vis Sci 2013, iovs.arvojournals.org article 2146525: right eyes at 4 mm,
+  0.18 +- 0.19 mm nasal and 0.30 +- 0.30 mm superior; change per mm of pupil size 0.01 +- 0.02 mm horizontally
+  and 0.04 +- 0.05 mm vertically, the decentration growing on constriction); the left eyes there, -0.14 +-
+  0.22 mm and 0.27 +- 0.29 mm, are not used (a left eye here is the right eye's mirror).
 - Elliptical stop: gkaModelEye's stop (Aguirre 2019, after Wyatt 1995, Vision Res 35:2021-2036, and Mathur et
   al. 2013): eccentricity e(r) = 0.103 (tanh(4.784 (r - 1.743)) + 0.149) of the stop radius r (mm); e < 0 is
   a horizontal major axis, e > 0 one at 3 pi / 7 (77.1 deg from nasal toward superior, right eye); |e| is

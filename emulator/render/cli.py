@@ -12,10 +12,14 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
+from eyehil.emulator.scene.presets_index import preset_names
 
-from eyehil.emulator.scene import load_scene, preset_names
+if TYPE_CHECKING:
+    import numpy as np
+
+# The parser is built without numpy or OpenCV (`eyehil render --help` stays fast); `run` imports the renderer.
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -36,10 +40,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import cv2
+    import numpy as np
 
     from eyehil.emulator.eye.select import eyes_from_spec
     from eyehil.emulator.forward import simulate
     from eyehil.emulator.render.renderer import Appearance, RenderSettings, Sensor, render_features
+    from eyehil.emulator.scene import load_scene
 
     if args.count <= 0:
         raise ValueError("--count must be positive")
@@ -89,6 +95,8 @@ def safe_stem(name: str) -> str:
 
 def _record(name: str, key: tuple[int, ...], frame) -> dict:
     """JSON-ready ground truth of one frame (NaN as null)."""
+    import numpy as np
+
     t = frame.truth
 
     def clean(a: np.ndarray) -> list:

@@ -2,11 +2,24 @@
 
 - `model`: `Scene`, `Screen`, `HeadPose`, `SceneError` (frames and units in its docstring);
 - `loader`: `load_scene(name_or_path)` (a preset or a TOML file, every error naming the key), `preset_names`;
-- `presets/*.toml`: guestrin2006, guestrin2006-table3, blignaut2014.
+- `presets/*.toml`: guestrin2006, guestrin2006-table3, blignaut2014; `presets_index`: `preset_names` (no numpy).
+
+The names below are loaded on first use, so that a command's help can list the presets without numpy.
 """
 
-from eyehil.emulator.scene.loader import load_scene, preset_names, scene_from_dict, scene_from_toml_bytes
-from eyehil.emulator.scene.model import SIDES, HeadPose, Scene, SceneError, Screen
+from __future__ import annotations
 
-__all__ = ["SIDES", "HeadPose", "Scene", "SceneError", "Screen", "load_scene", "preset_names", "scene_from_dict",
-           "scene_from_toml_bytes"]
+import importlib
+from typing import Any
+
+_EXPORTS = {"SIDES": "model", "HeadPose": "model", "Scene": "model", "SceneError": "model", "Screen": "model",
+            "load_scene": "loader", "scene_from_dict": "loader", "scene_from_toml_bytes": "loader",
+            "preset_names": "presets_index"}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -33,7 +33,6 @@ range (a camera of more than `MAX_RESOLUTION_PX` pixels a side, more than `MAX_L
 from __future__ import annotations
 
 import tomllib
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -41,8 +40,7 @@ import numpy as np
 
 from eyehil.emulator.optics.camera import PinholeCamera
 from eyehil.emulator.scene.model import SIDES, HeadPose, Scene, SceneError, Screen
-
-_PRESETS = resources.files(__package__) / "presets"
+from eyehil.emulator.scene.presets_index import PRESETS, preset_names
 
 MAX_RESOLUTION_PX = 16384
 MAX_LEDS = 16
@@ -191,13 +189,10 @@ def load_scene(name_or_path: str | Path) -> Scene:
             raise SceneError(f"scene file {path} does not exist")
         raw, origin = path.read_bytes(), str(path)
     else:
-        res = _PRESETS / f"{name_or_path}.toml"
+        res = PRESETS / f"{name_or_path}.toml"
         if not res.is_file():
             raise SceneError(f"unknown scene {name_or_path!r}; presets: {', '.join(preset_names())}")
         raw, origin = res.read_bytes(), f"preset {name_or_path}"
     return scene_from_toml_bytes(raw, origin)
 
 
-def preset_names() -> list[str]:
-    """Names of the bundled scene presets."""
-    return sorted(p.name[:-5] for p in _PRESETS.iterdir() if p.name.endswith(".toml"))

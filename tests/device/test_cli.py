@@ -1,6 +1,13 @@
-"""The subcommands, run in-process: emulate (device side), info, stream, calibrate, record (host side)."""
+"""The subcommands, run in-process: emulate (device side), info, stream, calibrate, record (host side);
+start-up and closed-port checks in a subprocess."""
 
 from __future__ import annotations
+
+import errno
+import os
+import socket
+import subprocess
+import sys
 
 import pytest
 from device_helpers import query
@@ -62,3 +69,24 @@ def test_stream_through_injected_faults(capsys) -> None:
     assert main(["stream", url, "--duration", "0.5", "--every", "100", "--fault", spec]) == 0
     out = capsys.readouterr().out
     assert "lost_frames" in out and "duplicates_dropped" in out
+
+
+def _closed_port() -> int:
+    """A loopback port nothing listens on (bound, never listening: a connection to it is refused)."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+@pytest.mark.parametrize("command", ["info", "stream"])
+def test_a_closed_port_is_one_line_naming_the_address(command: str) -> None:
+    """Refused at once whatever --timeout says (600 s here; the subprocess gets far less), one line, exit 1, and
+    the command never loaded the estimators or OpenCV on its way."""
+    url = f"socket://127.0.0.1:{_closed_port()}"
+    code = ("import sys\nfrom eyehil.cli import main\n"
+            f"rc = main([{command!r}, {url!r}, '--timeout', '600'])\n"
+            "print(rc, sorted(m for m in ('scipy', 'cv2', 'zmq', 'matplotlib') if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.stdout.strip() == "1 []"
+    refused = f"[Errno {errno.ECONNREFUSED}] {os.strerror(errno.ECONNREFUSED)}"
+    assert done.stderr.splitlines() == [f"eyehil {command}: LinkError: cannot open {url!r}: {refused}"]

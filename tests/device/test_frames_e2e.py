@@ -46,6 +46,9 @@ def _stream_both(url: str, count: int):
                 got = tracker.wire.images.popleft()
                 images[got.image.frame_id, got.image.eye] = got
         tracker.stop()
+        while tracker.wire.images:  # whole before the STOP's ACK
+            got = tracker.wire.images.popleft()
+            images[got.image.frame_id, got.image.eye] = got
         return samples, images, tracker.status()
 
 
@@ -107,7 +110,12 @@ def test_frames_are_the_device_render_and_detect_to_the_truth(backend: str, scen
     message = (f"{scene_name} over {backend}: {compared} images identical to the render, {blinks} shut; pupil RMS "
                f"{rms[0]:.4f} px over {len(pupils)}, glint RMS {rms[1]:.4f} px over {len(glints)}")
     print(message)
-    assert compared >= 0.8 * len(samples) * len(eyes) and blinks > 0 and status.samples_dropped == 0
+    # the fast clock runs in lockstep with the host: no image is dropped for a slow host or a busy machine; only the
+    # images of the exposure being sent when STOP came may be cut off (abandoned, counted)
+    missing = sorted({frame_id for frame_id, _eye in expected if (frame_id, _eye) not in images})
+    assert missing in ([], [samples[-1].frame_id]), f"images missing of exposures {missing}; {message}"
+    assert status.samples_dropped == 0 and status.frames_dropped <= len(eyes) and blinks > 0, status
+    assert compared == len(expected) - len(eyes) * len(missing) and compared > 0.9 * len(samples) * len(eyes)
     assert rms[0] < TOLERANCE_PX and rms[1] < TOLERANCE_PX, message
 
 

@@ -15,7 +15,7 @@ from device_helpers import CoreHost, core_device
 from eyehil.emulator.device.clock import ManualClock
 from eyehil.emulator.device.gaze import MAX_TIME_US, Kind, Timeline, clamp_time_us
 from eyehil.emulator.device.links.base import MAX_INBOX_BYTES, MAX_REPLY_BACKLOG, LinkRunner
-from eyehil.emulator.device.solver import FeatureSolver, SolveQueue
+from eyehil.emulator.device.solver import FeatureSolver, InThreadSolves, SolveQueue
 from eyehil.emulator.device.subject import Subject
 from eyehil.emulator.eye.normative import normative_eye
 from eyehil.emulator.scene import load_scene
@@ -55,7 +55,7 @@ def gated():
 
 def _subject(solver: GatedSolver, **kw) -> Subject:
     solver.gate.set()  # the start point is solved at construction
-    subject = Subject(solver, **kw)
+    subject = Subject(solver, solves=InThreadSolves, **kw)  # the gate is an Event of this process
     solver.gate.clear()
     return subject
 

@@ -2,7 +2,8 @@
 
 Drop, duplicate, corrupt, delay and reorder at 0.5 % each plus one disconnect: the host's loss count equals the
 truth exactly, no damaged or duplicated sample reaches the application, the host reconnects and resumes, and the
-recording marks every gap. The same run at 60 s is `python -m bench soak` (FAULT section) / docs/reliability.md.
+recording marks every gap. The same run at 60 s, judged by these checks, is `python -m bench faults`
+(docs/reliability.md).
 """
 
 from __future__ import annotations

@@ -95,3 +95,17 @@ def test_subject_fixates_blinks_and_jitters(solver: FeatureSolver) -> None:
     assert 0.05 < values.std() < 2.0  # px: a tenth of a degree moves the pupil image a little
     still.close()
     jittery.close()
+
+
+def test_a_requested_blink_closes_the_eyes_then_they_open(solver: FeatureSolver) -> None:
+    subject = Subject(solver, start=(50.0, 50.0))
+    assert subject.blink(200_000, 0.1)
+    obs = subject.observe(np.arange(0, 500_000, 10_000))
+    assert np.flatnonzero(obs.blink).tolist() == list(range(20, 30))  # 200..290 ms closed, open again at 300
+    with pytest.raises(ValueError):
+        subject.blink(600_000, 0.0)
+    with pytest.raises(ValueError):
+        subject.blink(600_000, float("nan"))
+    accepted = [subject.blink(1_000_000 + k, 0.1) for k in range(200)]
+    assert accepted.count(True) < 200 and not accepted[-1]  # bounded: a page cannot grow the list without end
+    subject.close()

@@ -4,6 +4,7 @@
 registry) or a listening TCP socket of this process behind (the facade's REP, XSUB and XPUB, or an LSL
 outlet's). `client_context` (autouse) gives `zmq.Context.instance()`, which the real client uses, a receive
 timeout and linger 0 before any client exists, so that a dead server raises instead of hanging the suite.
+`server`, `device_of` and `subscribe` make facades, real clients and their subscriptions, closed after the test.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from collections.abc import Callable, Iterator
 import pytest
 import zmq
 from leaks import leak_check
+from pupil_labs.pupil_core_network_client import Device
 from zmq_helpers import start_server
 
 from eyehil.emulator.device.pupil.server import PupilServer
@@ -49,3 +51,31 @@ def server() -> Iterator[Callable[..., PupilServer]]:
     yield make
     for s in started:
         s.close()
+
+
+@pytest.fixture
+def device_of():
+    """device_of(server) -> a connected real client; disconnected after the test."""
+    made = []
+
+    def connect(server) -> Device:
+        made.append(Device("127.0.0.1", server.port))
+        return made[-1]
+
+    yield connect
+    for d in made:
+        d.disconnect()
+
+
+@pytest.fixture
+def subscribe():
+    """subscribe(device, topics) -> a background subscription; disconnected after the test."""
+    subs = []
+
+    def make(device: Device, topics):
+        subs.append(device.subscribe_in_background(topics, buffer_size=2000))
+        return subs[-1]
+
+    yield make
+    for s in subs:
+        s.disconnect()

@@ -9,38 +9,9 @@ import time
 import cv2
 import numpy as np
 import pytest
-from pupil_labs.pupil_core_network_client import Device
 from zmq_helpers import eventually, subscribed, topic_is, wait_for
 
 from eyehil.protocols.pupil import VERSION
-
-
-@pytest.fixture
-def device_of():
-    """device_of(server) -> a connected real client; disconnected after the test."""
-    made = []
-
-    def connect(server) -> Device:
-        made.append(Device("127.0.0.1", server.port))
-        return made[-1]
-
-    yield connect
-    for d in made:
-        d.disconnect()
-
-
-@pytest.fixture
-def subscribe():
-    """subscribe(device, topics) -> a background subscription; disconnected after the test."""
-    subs = []
-
-    def make(device: Device, topics):
-        subs.append(device.subscribe_in_background(topics, buffer_size=2000))
-        return subs[-1]
-
-    yield make
-    for s in subs:
-        s.disconnect()
 
 
 def test_connect_version_and_clock_offset(server, device_of) -> None:
@@ -151,3 +122,16 @@ def test_high_frequency_message_sending(server, device_of, subscribe) -> None:
         last = wait_for(sub, lambda m: m.payload.get("index") == 499)
     assert last.payload["label"] == "burst"
     eventually(lambda: sum(a["label"] == "burst" for a in srv.annotations) == 500)
+
+
+@pytest.mark.parametrize("kind", ["process", "thread"])
+def test_frames_rendered_by_workers_arrive_in_order(server, device_of, subscribe, kind: str) -> None:
+    """Images rendered and encoded in a render pool (issue 16) are published in exposure order."""
+    srv = server(scene="blignaut2014", frame_rate_hz=50, render_workers=1, render_kind=kind, frame_format="jpeg")
+    sub = subscribe(device_of(srv), ["frame.eye.1"])
+    messages = [wait_for(sub, topic_is("frame.eye.1"), timeout_s=60) for _ in range(4)]
+    indices = [m.payload["index"] for m in messages]
+    assert indices == sorted(indices) and len(set(indices)) == 4
+    image = cv2.imdecode(np.frombuffer(messages[-1].raw_data[0], np.uint8), cv2.IMREAD_GRAYSCALE)
+    assert image.shape == (240, 320) and image.min() < 60 < image.max()
+    assert srv.counters["frames_published"] >= 4

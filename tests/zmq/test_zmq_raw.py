@@ -86,7 +86,7 @@ def test_prefix_subscriptions_and_bgr_frames(server, context) -> None:
             image = np.frombuffer(msg["__raw_data__"][0], dtype=np.uint8).reshape(msg["height"], msg["width"], 3)
     assert image is not None and image.shape == (240, 320, 3)
     assert (image[..., 0] == image[..., 2]).all() and image.min() < 60 < image.max()
-    assert topics <= {"frame.eye.0", "pupil.0.2d", "pupil.0.3d"} and "pupil.0.2d" in topics
+    assert topics <= {"frame.eye.0", "frame.world", "pupil.0.2d", "pupil.0.3d"} and "pupil.0.2d" in topics
 
 
 def test_publishing_directly_to_the_backbone(server, context) -> None:

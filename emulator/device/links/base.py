@@ -37,11 +37,16 @@ thread calls it)::
     poll(now_us=None, backlog=0)  queue the samples due; drop (and count) those that would exceed the
                                   core's output limit given `backlog` bytes already queued downstream
     read_available(max_bytes=None) -> bytes;  pending -> int
-    next_due_us(count=1) -> int | None      device time by which the next `count` samples are due
+    next_due_us(count=1, wake=True) -> int | None   device time by which the next `count` samples are due
+                                  (`wake`: or sooner, when the core wants an early look)
+    fast_room(backlog) -> bool    optional: fast clock, may the next samples be taken now (default: the
+                                  link holds less than `FAST_LOW_WATER`); set_wake(callable) optional
     connection_reset();  close()
 
 The runner's thread owns the core: it wakes at each sample's due time (real clock), whenever the link
-has room (fast clock) and whenever the link received bytes, which it feeds and answers at once.
+has room (fast clock) and whenever the link received bytes, which it feeds and answers at once. A link with
+`pump()` and `wake_delay_s()` (`paced.PacedLink`, the link-rate option) is also pumped at each wake-up and
+wakes the runner when it can take more.
 
 Limits (a host that floods commands and never reads cannot grow the device): the runner's inbox holds at
 most `MAX_INBOX_BYTES` / `MAX_INBOX_CHUNKS`; bytes beyond are dropped and counted (`counters`
@@ -60,10 +65,12 @@ from typing import Protocol
 
 _OPEN: dict[int, str] = {}
 _OPEN_LOCK = threading.Lock()
-FAST_LOW_WATER = 8192  # fast clock: produce more samples only while the link holds less than this (bytes)
+FAST_LOW_WATER = 8192  # fast clock: produce more samples only while the link holds less than this (bytes), unless
+# the core says otherwise (`fast_room`: a frame stream's own bounded render-ahead queue and frame budget)
 FAST_BLOCK = 32  # fast clock: samples produced per step
 FAST_STEPS = 4  # fast clock: steps between two looks at the host's commands
 IDLE_WAIT_S = 0.25
+PACED_MIN_WAIT_S = 0.0002  # a paced link's runner sleeps at least this long between hand-overs (wall s)
 MAX_INBOX_BYTES = 256 * 1024  # host bytes waiting for the runner
 MAX_INBOX_CHUNKS = 4096  # host reads waiting for the runner
 MAX_REPLY_BACKLOG = 1024 * 1024  # link backlog (bytes) above which the runner stops feeding commands (> the
@@ -141,6 +148,8 @@ class LinkRunner:
     def start(self) -> LinkRunner:
         """Attach to the link and start the thread."""
         self.link.attach(self._receive, self._reset)
+        if hasattr(self.core, "set_wake"):
+            self.core.set_wake(self._wake.set)
         self._thread.start()
         return self
 
@@ -199,23 +208,39 @@ class LinkRunner:
         self._flush()
         if clock.fast and self.link.connected:
             for _ in range(FAST_STEPS):
-                due = self.core.next_due_us(FAST_BLOCK)
-                if due is None or self.link.backlog() >= FAST_LOW_WATER:
+                due = self.core.next_due_us(FAST_BLOCK, wake=False)
+                if due is None or not self._fast_room():
                     break
                 clock.push(due)
                 self.core.poll(due, self.link.backlog())
                 self._flush()
             idle = self.core.next_due_us() is None
-            return IDLE_WAIT_S if idle else (0.001 if self.link.backlog() >= FAST_LOW_WATER else 0.0)
+            return IDLE_WAIT_S if idle else (0.0 if self._fast_room() else 0.001)
         due = self.core.next_due_us()
         return IDLE_WAIT_S if due is None else min(IDLE_WAIT_S, clock.wall_delay_s(due))
+
+    def _pace(self, wait: float) -> float:
+        """A paced link (`paced.PacedLink`): hand it what its rate admits now; wake when it admits more."""
+        pump = getattr(self.link, "pump", None)
+        if pump is None:
+            return wait
+        pump()
+        delay = self.link.wake_delay_s()
+        return wait if delay is None else min(wait, max(delay, PACED_MIN_WAIT_S))
+
+    def _fast_room(self) -> bool:
+        """Fast clock: may the device take its next samples? The core decides if it can (`fast_room`: a frame
+        stream renders ahead into a bounded queue); otherwise while the link holds less than `FAST_LOW_WATER`."""
+        backlog = self.link.backlog()
+        room = getattr(self.core, "fast_room", None)
+        return room(backlog) if room is not None else backlog < FAST_LOW_WATER
 
     def _run(self) -> None:
         try:
             while not self._stopping:
                 self._wake.clear()
                 self._drain_inbox()
-                wait = self._service()
+                wait = self._pace(self._service())
                 if wait > 0:
                     self._wake.wait(wait)
         except Exception as exc:  # a bug in a core or link: the device stops, loudly, instead of hanging

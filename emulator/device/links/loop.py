@@ -115,4 +115,7 @@ def open_loop(url: str, timeout: float | None = 1.0, base: DeviceOptions | None 
     if not url.startswith("loop://"):
         raise ValueError(f"not a loop:// URL: {url!r}")
     query = url[len("loop://"):].lstrip("/").removeprefix("?")
-    return LoopPort(build_device(options_from_query(query, base)), timeout, name=url)
+    options = options_from_query(query, base)
+    if options.link_rate:
+        raise ValueError("link_rate paces the native links (pty, tcp, usbip), not loop://")
+    return LoopPort(build_device(options), timeout, name=url)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import socket
 
 from eyehil.emulator.device.links.fdlink import CHUNK, FdLink
+from eyehil.emulator.device.links.listen import create_server
 
 
 class TcpLink(FdLink):
@@ -19,7 +20,7 @@ class TcpLink(FdLink):
 
     def __init__(self, host: str = "127.0.0.1", port: int = 0) -> None:
         """Listen on `host`:`port` (0 = any free port)."""
-        self._server = socket.create_server((host, port))
+        self._server = create_server("tcp", host, port)
         self._server.setblocking(False)
         self._client: socket.socket | None = None
         bound_host, bound_port = self._server.getsockname()[:2]

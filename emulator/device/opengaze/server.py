@@ -37,6 +37,7 @@ import numpy as np
 from eyehil.emulator.device.build import DeviceOptions, build_subject
 from eyehil.emulator.device.clock import Clock, RealTimeClock, make_clock
 from eyehil.emulator.device.links.base import register_open, unregister
+from eyehil.emulator.device.links.listen import create_server
 from eyehil.emulator.device.opengaze.calibration import DEFAULT_POINTS
 from eyehil.emulator.device.opengaze.core import OpenGazeDevice, OpenGazeOptions, Out
 from eyehil.emulator.device.opengaze.samples import fraction_to_screen
@@ -99,10 +100,15 @@ class OpenGazeServer:
         self.close()
 
     def start(self) -> OpenGazeServer:
-        """Solve ahead what the default calibration needs (a few seconds), bind, listen, start the thread."""
-        self._warm_up()
-        self.device = OpenGazeDevice(self.subject, self.clock, self.options.device)
-        listener = socket.create_server((self.options.host, self.options.port), reuse_port=False, backlog=16)
+        """Bind and listen (an address in use fails at once, `ListenError`), solve ahead what the default
+        calibration needs (a few seconds; a host that connects meanwhile waits in the backlog), start the thread."""
+        listener = create_server("opengaze", self.options.host, self.options.port, reuse_port=False, backlog=16)
+        try:
+            self._warm_up()
+            self.device = OpenGazeDevice(self.subject, self.clock, self.options.device)
+        except BaseException:
+            listener.close()
+            raise
         listener.setblocking(False)
         self._listener, self.port = listener, listener.getsockname()[1]
         self._selector = selectors.DefaultSelector()

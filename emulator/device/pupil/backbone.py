@@ -13,6 +13,8 @@ import threading
 
 import zmq
 
+from eyehil.emulator.device.links.listen import check_port, listen_error
+
 MAX_MESSAGE_BYTES = 32 * 1024 * 1024
 
 
@@ -26,11 +28,16 @@ def make_socket(context: zmq.Context, kind: int, hwm: int) -> zmq.Socket:
 
 
 def bind(sock: zmq.Socket, host: str, port: int = 0) -> int:
-    """Bind `sock` to tcp://host:port (port 0: any free port); return the port."""
-    if port:
-        sock.bind(f"tcp://{host}:{port}")
-        return port
-    return sock.bind_to_random_port(f"tcp://{host}")
+    """Bind `sock` to tcp://host:port (port 0: any free port); return the port. `ListenError` (naming the link
+    "zmq" and the address) if it cannot; ValueError for a port out of 0..65535 (libzmq would wrap it around)."""
+    check_port("zmq", port)
+    try:
+        if port:
+            sock.bind(f"tcp://{host}:{port}")
+            return port
+        return sock.bind_to_random_port(f"tcp://{host}")
+    except zmq.ZMQError as exc:
+        raise listen_error("zmq", host, port or "*", exc) from exc
 
 
 class Backbone:

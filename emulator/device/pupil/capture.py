@@ -20,9 +20,11 @@
   "Frame_Publisher"}`` -> ``frame_publishing.stopped``;
 - ``notify.recording.should_start {session_name}`` / ``should_stop`` -> ``recording.started`` / ``stopped``;
 - ``annotation``: kept (`annotations`: the latest `MAX_ANNOTATIONS` within `MAX_ANNOTATIONS_BYTES` of JSON
-  text; one over `MAX_ANNOTATION_BYTES` is refused), and while recording into a directory, appended to
-  ``<record_dir>/<session>/annotations.jsonl`` (one JSON object per line) beside ``info.player.json``; the
-  session folder is never outside `record_dir`.
+  text; one over `MAX_ANNOTATION_BYTES` is refused).
+
+While a recording runs with a `record_dir`, its folder (`recorder.Recording`, never outside `record_dir`)
+receives the notifications and annotations that arrive here and, through `record`, the pupil and gaze datums
+the device thread publishes, within `record_max_bytes` for all the recordings of the facade.
 
 Anything else is ignored. `counters` counts what was refused.
 """
@@ -37,15 +39,24 @@ from collections import Counter, deque
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
 import numpy as np
 
 from eyehil.emulator.device.pupil.calibration import MAX_TARGETS, Gazer, Session, fit, norm_to_screen
 from eyehil.emulator.device.pupil.datums import PupilTime
+from eyehil.emulator.device.pupil.recorder import Budget, Recording, open_folder
 from eyehil.emulator.device.stimulus import stimulus_problem
 from eyehil.emulator.scene import Scene
-from eyehil.protocols.pupil import FRAME_FORMATS, RAW, norm_pos_of, notification, parse_ref_data
+from eyehil.protocols.pupil import (
+    FRAME_FORMATS,
+    RAW,
+    PupilMessageError,
+    norm_pos_of,
+    notification,
+    pack,
+    parse_ref_data,
+)
 
 MAX_ANNOTATIONS = 100_000
 MAX_ANNOTATION_BYTES = 1 << 20  # one annotation (its JSON text); larger ones are refused
@@ -54,6 +65,7 @@ MARKER_S = 1.0  # the screen-marker calibration: each marker shown this long
 MARKER_LEAD_S = 0.3  # ... the first one this long after `C`
 MAX_MARKERS = 9
 FRAME_PUBLISHER = "Frame_Publisher"
+RECORD_MAX_BYTES = 1 << 30  # datums all the recordings of one facade may write
 
 
 def _number(value: Any) -> float | None:
@@ -67,7 +79,8 @@ class Capture:
 
     def __init__(self, scene: Scene, eye_ids: tuple[int, ...], time: PupilTime,
                  show: Callable[[tuple[float, float], int], None], *, settle_s: float = 0.35,
-                 frame_format: str = "gray", record_dir: str | Path | None = None) -> None:
+                 frame_format: str = "gray", record_dir: str | Path | None = None,
+                 record_max_bytes: int = RECORD_MAX_BYTES) -> None:
         """`show(screen_mm, t_us)` makes the subject look at a screen point from device time `t_us`."""
         self.scene, self.eye_ids, self.time, self.show = scene, eye_ids, time, show
         self.settle_s = settle_s
@@ -83,8 +96,8 @@ class Capture:
         self._lock = threading.Lock()  # annotations are read by other threads
         self.counters: Counter[str] = Counter()
         self._shown: tuple[float, float] | None = None
-        self._file: TextIO | None = None
-        self._info: dict[str, Any] | None = None
+        self._recorder: Recording | None = None
+        self._budget = Budget(record_max_bytes)
         self._fit: Future | None = None
         self._executor: ThreadPoolExecutor | None = None
         self._handlers: dict[str, Callable[[dict[str, Any]], list[dict[str, Any]]]] = {
@@ -98,10 +111,11 @@ class Capture:
     def on_message(self, topic: str, payload: dict[str, Any]) -> list[dict[str, Any]]:
         """React to one message from the backbone; return the payloads to publish."""
         if topic == "annotation" or topic.startswith("annotation."):
-            return self._annotation(payload)
+            return self._annotation(topic, payload)
         subject = payload.get("subject")
         if not topic.startswith("notify.") or not isinstance(subject, str):
             return []
+        self._record_received(topic, payload)
         handler = self._handlers.get(subject)
         return handler(payload) if handler else []
 
@@ -252,15 +266,9 @@ class Capture:
         self.recording = name or f"recording_{self.time.now():.3f}".replace(".", "_")
         path = ""
         if self.record_dir is not None:
-            folder = self.record_dir / self.recording
             try:
-                if not folder.resolve().is_relative_to(self.record_dir.resolve()):  # never outside record_dir
-                    raise OSError(f"{folder} lies outside {self.record_dir}")
-                folder.mkdir(parents=True, exist_ok=True)
-                self._info = {"recording_name": self.recording, "recording_software_name": "eyehil",
-                              "start_time_synced_s": self.time.now(), "duration_s": 0.0}
-                self._write_info(folder)
-                self._file = (folder / "annotations.jsonl").open("a", encoding="utf-8")
+                folder = open_folder(self.record_dir, self.recording)
+                self._recorder = Recording(folder, self.recording, self.time.now(), self._budget)
                 path = str(folder)
             except OSError:
                 self.counters["recording_errors"] += 1
@@ -271,21 +279,40 @@ class Capture:
         if self.recording is None:
             return []
         name, self.recording = self.recording, None
-        self._close_file()
-        if self._info is not None and self.record_dir is not None:
-            self._info["duration_s"] = self.time.now() - self._info["start_time_synced_s"]
-            try:
-                self._write_info(self.record_dir / name)
-            except OSError:
-                self.counters["recording_errors"] += 1
-            self._info = None
+        self._close_recorder()
         return [self._note("recording.stopped", session_name=name)]
 
-    def _write_info(self, folder: Path) -> None:
-        """The recording's `info.player.json` (name, software, start in Pupil time, duration s)."""
-        (folder / "info.player.json").write_text(json.dumps(self._info, indent=1), encoding="utf-8")
+    def record(self, topic: str, datum: bytes, timestamp: Any) -> None:
+        """While a recording runs into a folder: record a datum published by the device (its msgpack bytes)."""
+        if self._recorder is not None:
+            try:
+                self._recorder.add(topic, datum, timestamp, self.time.now())
+            except OSError:
+                self.counters["recording_errors"] += 1
+                self._close_recorder()
 
-    def _annotation(self, payload: dict[str, Any]) -> list[dict[str, Any]]:
+    def _record_received(self, topic: str, payload: dict[str, Any]) -> None:
+        """Record a notification or annotation from the backbone (without its raw frames)."""
+        if self._recorder is not None:
+            try:
+                datum = pack({k: v for k, v in payload.items() if k != RAW})[1]
+            except PupilMessageError:
+                self.counters["recording_errors"] += 1
+                return
+            self.record(topic, datum, payload.get("timestamp"))
+
+    def _close_recorder(self) -> None:
+        if self._recorder is None:
+            return
+        recorder, self._recorder = self._recorder, None
+        self.counters["recorded"] += recorder.written
+        self.counters["recorded_dropped"] += recorder.dropped
+        try:
+            recorder.close(self.time.now())
+        except OSError:
+            self.counters["recording_errors"] += 1
+
+    def _annotation(self, topic: str, payload: dict[str, Any]) -> list[dict[str, Any]]:
         record = {k: v for k, v in payload.items() if k != RAW}
         record["recording"] = self.recording
         text = json.dumps(record, default=repr)
@@ -299,10 +326,10 @@ class Capture:
                 self._annotation_bytes -= self._annotations.popleft()[1]
                 self.counters["annotations_evicted"] += 1
         self.counters["annotations"] += 1
-        if self._file is not None:
+        self._record_received(topic, payload)
+        if self._recorder is not None:
             try:
-                self._file.write(text + "\n")
-                self._file.flush()
+                self._recorder.annotation_line(text)
             except OSError:
                 self.counters["recording_errors"] += 1
         return []
@@ -313,14 +340,9 @@ class Capture:
         with self._lock:
             return [a for a, _ in self._annotations]
 
-    def _close_file(self) -> None:
-        if self._file is not None:
-            self._file.close()
-            self._file = None
-
     def close(self) -> None:
-        """Stop the fit worker and close the annotation file."""
+        """Stop the fit worker and finish a recording under way."""
         if self._executor is not None:
             self._executor.shutdown(wait=True, cancel_futures=True)
             self._executor = None
-        self._close_file()
+        self._close_recorder()

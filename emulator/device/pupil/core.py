@@ -6,7 +6,8 @@ publishes) and a SUB connected to its XPUB, subscribed to ``notify.`` and ``anno
 annotations from Pupil Remote and from clients publishing directly). It wakes at each exposure's
 mid-exposure time (device clock; waits under a millisecond use an event's timeout, not the socket poll) and
 whenever a message arrives, and per exposure publishes ``pupil.<id>.2d`` and ``glint.<id>`` of every tracked
-eye (`zmq_datums`), hands every k-th exposure to the frame thread (`zmq_frames`), and queues it for gaze
+eye (`zmq_datums`), hands every k-th exposure to the frame thread (`zmq_frames`) and every k_w-th, with the
+target then on the screen (`world.TargetTrack`), to the world thread (`pupil/world.py`), and queues it for gaze
 mapping (`zmq_gaze`) and the LSL outlet. Falling more than `MAX_BEHIND_S` behind, it skips the excess
 exposures (counted in ``exposures_skipped``) instead of bursting them.
 
@@ -30,6 +31,7 @@ from eyehil.emulator.device.pupil.datums import EyeWindow, PupilTime, exposure_d
 from eyehil.emulator.device.pupil.eye3d import EyeModel3d, pupil_3d_datums
 from eyehil.emulator.device.pupil.frames import FramePublisher
 from eyehil.emulator.device.pupil.gaze import BATCH_S, GazeStream
+from eyehil.emulator.device.pupil.world import TargetTrack, WorldPublisher
 from eyehil.emulator.device.subject import Subject
 from eyehil.protocols.enums import Eye
 from eyehil.protocols.pupil import PupilMessageError, pack, unpack
@@ -37,6 +39,7 @@ from eyehil.protocols.pupil import PupilMessageError, pack, unpack
 MAX_BEHIND_S = 0.25
 IDLE_S = 0.05
 DRAIN = 256  # messages handled per wake-up at most
+RECORDED = ("pupil.", "gaze.")  # what the device publishes that a recording keeps (notifications come back)
 
 
 class DeviceThread:
@@ -45,13 +48,15 @@ class DeviceThread:
     def __init__(self, context: zmq.Context, endpoint: str, sub: zmq.Socket, subject: Subject, clock: Clock,
                  time: PupilTime, windows: list[EyeWindow], capture: Capture, *, rate_hz: int,
                  frames: FramePublisher | None = None, frame_every: int = 1, outlet: Any = None,
-                 hwm: int = 1000, surface_name: str = "screen") -> None:
+                 hwm: int = 1000, surface_name: str = "screen", world: WorldPublisher | None = None,
+                 world_every: int = 1) -> None:
         """Publish to the XSUB at `endpoint`; `sub`: the SUB already connected and subscribed (the server
         checked that messages reach it)."""
         scene = subject.solver.scene
         self.subject, self.clock, self.time, self.windows = subject, clock, time, windows
         self.capture, self.frames, self.frame_every, self.outlet = capture, frames, frame_every, outlet
         self.rate_hz = rate_hz
+        self.world, self.world_every, self.targets = world, world_every, TargetTrack()
         tracked = tuple(Eye(w.eye_id) for w in windows)
         self.camera = Camera(subject, tuple(int(v) for v in scene.camera.resolution_px), tracked)
         self._selection = Selection(tracked, len(scene.leds))
@@ -74,6 +79,7 @@ class DeviceThread:
     def show(self, screen_mm: tuple[float, float], t_us: int) -> None:
         """The subject looks at `screen_mm` from device time `t_us` (the `Capture`'s stand-in for the screen)."""
         self.camera.invalidate(self.subject.look_at(screen_mm, t_us))
+        self.targets.shown(screen_mm, t_us)
 
     def start(self) -> None:
         """Start exposing now and the thread."""
@@ -127,12 +133,16 @@ class DeviceThread:
 
     def _publish(self, payloads: list[dict[str, Any]]) -> None:
         """Publish, each payload with its topic's sequence number `seq` (0, 1, 2 ... per topic; an extra key
-        Pupil clients ignore, so that a subscriber tells skipped from dropped)."""
+        Pupil clients ignore, so that a subscriber tells skipped from dropped); pupil and gaze datums also go to
+        a recording under way (`Capture.record`; notifications come back through the SUB and are recorded there)."""
         for payload in payloads:
             topic = payload["topic"]
             payload["seq"] = self._seq[topic]
             self._seq[topic] += 1
-            self._pub.send_multipart(pack(payload))
+            frames = pack(payload)
+            self._pub.send_multipart(frames)
+            if topic.startswith(RECORDED):
+                self.capture.record(topic, frames[1], payload.get("timestamp"))
         self.counters["published"] += len(payloads)
 
     # --- exposures -------------------------------------------------------------------------------
@@ -166,7 +176,13 @@ class DeviceThread:
 
     def _offer_frame(self, exp: Exposures, n: int) -> None:
         frame_id = int(exp.batch.frame_id[n])
-        if self.frames is None or not self.capture.frames_on or frame_id % self.frame_every:
+        if not self.capture.frames_on:
+            return
+        if self.world is not None and frame_id % self.world_every == 0:
+            t_us = int(exp.time_us[n])
+            self.world.offer(float(self.time.of_us(t_us)), self.targets.at(t_us, self.subject.timeline),
+                             self.capture.frame_format)
+        if self.frames is None or frame_id % self.frame_every:
             return
         self.frames.offer(frame_id, float(self.time.of_us(int(exp.time_us[n]))), exp.values[n],
                           bool(exp.blink[n]), self.capture.frame_format)

@@ -9,27 +9,40 @@ blink: the eye's last open row with the lids shut, `appearance.closed`), noise f
 Payload (`eyehil.protocols.pupil.frame_datum`): {topic, width, height, index, timestamp, format} and one raw frame:
 ``gray`` H x W bytes, ``bgr`` H x W x 3 (the gray value in each channel), ``jpeg`` (`cv2.imencode`, a
 one-channel JPEG). `index` counts the images offered per eye, including those dropped, so a subscriber sees
-gaps. The core thread `offer`s; the frame thread ("eyehil-zmq-frames") renders and publishes on its own PUB.
-Capacity: at most `QUEUE` exposures wait; an exposure offered to a full queue is dropped (`dropped` counts
-images), so rendering never delays the pupil datums.
+gaps. The core thread `offer`s; the frame thread ("eyehil-zmq-frames") hands the exposures to a
+`render_pool.RenderPool` and publishes the images, in exposure order, on its own PUB. With ``workers=0`` the
+frame thread renders them itself, sharing the interpreter lock with the thread that publishes the pupil
+datums; with ``workers`` >= 1 they are rendered (and encoded) in that many processes (``kind="process"``) or
+pool threads (``kind="thread"``), so the datums' thread is not held up. Capacity: at most `QUEUE` exposures
+wait for the frame thread and `ahead` render in the pool; an exposure offered to a full queue is dropped
+(`dropped` counts images, as it counts images whose rendering failed), so rendering never delays the datums.
+`ImageThread` is the simpler bounded thread of the world view (`pupil/world.py`): at most `QUEUE` jobs wait, a
+job offered to a full queue is dropped and counted, and the thread draws each itself.
 """
 
 from __future__ import annotations
 
+import logging
 import queue
 import threading
+from collections import deque
+from concurrent.futures import Future
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 import zmq
 
 from eyehil.emulator.device.appearance import closed
-from eyehil.emulator.device.frames import ExposureRenderer, exposure_rng, render_region
+from eyehil.emulator.device.frames import ExposureRenderer
 from eyehil.emulator.device.pupil.datums import EyeWindow
+from eyehil.emulator.device.render_pool import RenderJob, RenderPool, encode_image
 from eyehil.protocols.pupil import frame_datum, pack
 
+# encode_image lives in render_pool (workers encode)
+__all__ = ["FrameJob", "FramePublisher", "ImageThread", "encode_image"]
+
 QUEUE = 2
+AHEAD = 4  # exposures rendering in the pool at most (with workers)
 POLL_S = 0.1
 
 
@@ -45,34 +58,86 @@ class FrameJob:
     fmt: str
 
 
-def encode_image(image: np.ndarray, fmt: str) -> bytes:
-    """The raw frame of an 8-bit gray image (H, W) in `fmt` (gray, bgr, jpeg)."""
-    if fmt == "bgr":
-        return cv2.cvtColor(image, cv2.COLOR_GRAY2BGR).tobytes()
-    if fmt == "jpeg":
-        ok, data = cv2.imencode(".jpg", image)
-        if not ok:
-            raise ValueError("JPEG encoding failed")
-        return data.tobytes()
-    return np.ascontiguousarray(image).tobytes()
+class ImageThread:
+    """A thread that renders and publishes images on its own PUB (connected to the backbone's XSUB), fed
+    through a queue of at most `QUEUE` jobs: a job offered to a full queue is dropped and its `images`
+    counted in `dropped`, so the offering thread never waits. Subclasses draw and send in `_publish(job)`."""
+
+    THREAD_NAME = "eyehil-zmq-images"
+
+    def __init__(self, context: zmq.Context, endpoint: str, hwm: int) -> None:
+        self.dropped = self.published = 0
+        self._queue: queue.Queue = queue.Queue(QUEUE)
+        self._stop = threading.Event()
+        self._pub = context.socket(zmq.PUB)
+        self._pub.setsockopt(zmq.LINGER, 0)
+        self._pub.setsockopt(zmq.SNDHWM, hwm)
+        self._pub.connect(endpoint)
+        self._thread = threading.Thread(target=self._run, name=self.THREAD_NAME, daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def _submit(self, job: object, images: int) -> None:
+        """Queue `job` (worth `images` images), or drop and count it if the queue is full."""
+        try:
+            self._queue.put_nowait((job, images))
+        except queue.Full:
+            self.dropped += images
+
+    def _run(self) -> None:
+        try:
+            while not self._stop.is_set():
+                try:
+                    job, _ = self._queue.get(timeout=POLL_S)
+                except queue.Empty:
+                    continue
+                self._publish(job)
+        finally:
+            self._pub.close(linger=0)
+
+    def _publish(self, job: object) -> None:
+        raise NotImplementedError
+
+    def _send(self, message: dict) -> None:
+        self._pub.send_multipart(pack(message), copy=False)
+        self.published += 1
+
+    def close(self) -> None:
+        """Stop the thread (jobs waiting are dropped and counted) and close the socket."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join()
+        else:
+            self._pub.close(linger=0)
+        while True:
+            try:
+                self.dropped += self._queue.get_nowait()[1]
+            except queue.Empty:
+                break
 
 
 class FramePublisher:
     """Renders and publishes eye images; see the module docstring."""
 
     def __init__(self, context: zmq.Context, endpoint: str, renderer: ExposureRenderer, windows: list[EyeWindow],
-                 *, seed: int = 0, hwm: int = 1000) -> None:
-        """Publish to the backbone's XSUB at `endpoint`; call `start`, then `close`."""
+                 *, seed: int = 0, hwm: int = 1000, workers: int = 0, kind: str = "process") -> None:
+        """Publish to the backbone's XSUB at `endpoint`; render in `workers` processes or threads (`kind`; 0: on
+        the frame thread); call `start`, then `close`."""
         self.renderer, self.windows, self.seed = renderer, windows, seed
         self.dropped = self.published = 0
         self._counts = [0] * len(windows)
         self._open: dict[int, np.ndarray] = {}  # last open-eye row per tracked eye
         self._queue: queue.Queue[FrameJob] = queue.Queue(QUEUE)
         self._stop = threading.Event()
+        self._event = threading.Event()  # a job was offered or an image rendered
+        self._ahead = AHEAD if workers else 1
         self._pub = context.socket(zmq.PUB)
         self._pub.setsockopt(zmq.LINGER, 0)
         self._pub.setsockopt(zmq.SNDHWM, hwm)
         self._pub.connect(endpoint)
+        self._pending: deque[tuple[FrameJob, dict[tuple[int, int, int, int], Future]]] = deque()
+        self._pool = RenderPool(renderer, workers, kind, on_done=self._event.set)
         self._thread = threading.Thread(target=self._run, name="eyehil-zmq-frames", daemon=True)
 
     def start(self) -> None:
@@ -87,6 +152,8 @@ class FramePublisher:
             self._queue.put_nowait(FrameJob(frame_id, timestamp, rows, indices, fmt))
         except queue.Full:
             self.dropped += len(self.windows)
+        else:
+            self._event.set()
 
     def _row(self, e: int, row: np.ndarray, blink: bool) -> np.ndarray:
         if not blink:
@@ -98,33 +165,52 @@ class FramePublisher:
     def _run(self) -> None:
         try:
             while not self._stop.is_set():
-                try:
-                    job = self._queue.get(timeout=POLL_S)
-                except queue.Empty:
-                    continue
-                self._publish(job)
+                self._event.wait(POLL_S)
+                self._event.clear()
+                while len(self._pending) < self._ahead:
+                    try:
+                        job = self._queue.get_nowait()
+                    except queue.Empty:
+                        break
+                    self._pending.append((job, self._submit(job)))
+                while self._pending and all(f.done() for f in self._pending[0][1].values()):
+                    self._publish(*self._pending.popleft())
         finally:
             self._pub.close(linger=0)
 
-    def _publish(self, job: FrameJob) -> None:
-        """Render the job's windows (once per distinct window) and send one message per eye."""
-        drawn: dict[tuple[int, int, int, int], bytes] = {}
+    def _submit(self, job: FrameJob) -> dict[tuple[int, int, int, int], Future]:
+        """Start rendering the job's distinct windows (eyes sharing a window share one rendering)."""
         eyes = tuple(range(len(job.rows)))
-        for win, index in zip(self.windows, job.indices, strict=True):
+        futures: dict[tuple[int, int, int, int], Future] = {}
+        for win in self.windows:
             region = (win.x0, win.y0, win.width, win.height)
-            if region not in drawn:
-                rng = exposure_rng(self.seed, job.frame_id, win.eye_id)
-                frame = render_region(self.renderer, job.rows, eyes, region, rng)
-                drawn[region] = encode_image(frame.image, job.fmt)
-            message = frame_datum(win.eye_id, index, job.timestamp, win.width, win.height, job.fmt, drawn[region])
+            if region not in futures:
+                futures[region] = self._pool.submit(RenderJob(job.frame_id, win.eye_id, job.rows, self.seed,
+                                                              region=region, eye_indices=eyes, fmt=job.fmt))
+        return futures
+
+    def _publish(self, job: FrameJob, futures: dict[tuple[int, int, int, int], Future]) -> None:
+        """Send one message per eye of a rendered job (an image whose rendering failed is dropped, counted)."""
+        for win, index in zip(self.windows, job.indices, strict=True):
+            future = futures[(win.x0, win.y0, win.width, win.height)]
+            try:
+                data = future.result().encoded
+            except Exception:
+                logging.getLogger(__name__).exception("frame %d of eye %d not rendered", job.frame_id, win.eye_id)
+                self.dropped += 1
+                continue
+            message = frame_datum(win.eye_id, index, job.timestamp, win.width, win.height, job.fmt, data)
             self._pub.send_multipart(pack(message), copy=False)
             self.published += 1
 
     def close(self) -> None:
-        """Stop the thread (images waiting are dropped) and close the socket."""
+        """Stop the thread and the pool (images waiting or rendering are dropped) and close the socket."""
         self._stop.set()
+        self._event.set()
         if self._thread.is_alive():
             self._thread.join()
         else:
             self._pub.close(linger=0)
-        self.dropped += self._queue.qsize() * len(self.windows)
+        self._pool.close()
+        self.dropped += (self._queue.qsize() + len(self._pending)) * len(self.windows)
+        self._pending.clear()

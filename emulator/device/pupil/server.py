@@ -8,8 +8,9 @@ Topology (reference/protocols.md section 1; docs/zmq.md): Pupil Remote, a REP so
 (`zmq_remote`), and the IPC backbone (`zmq_backbone`), an XSUB and an XPUB bound on random ports of `host`
 relayed on the thread "eyehil-zmq-backbone".
 Clients publish to the XSUB (``PUB_PORT``) and subscribe to the XPUB (``SUB_PORT``); the device thread
-(`zmq_core`, "eyehil-zmq-publisher") and the frame thread (`zmq_frames`, "eyehil-zmq-frames") publish
-through the backbone too. Everything binds to 127.0.0.1 unless `host` names another interface.
+(`zmq_core`, "eyehil-zmq-publisher"), the frame thread (`zmq_frames`, "eyehil-zmq-frames") and the world
+thread (`pupil/world.py`, "eyehil-zmq-world") publish through the backbone too. Everything binds to
+127.0.0.1 unless `host` names another interface.
 
 Start-up checks the path from Pupil Remote's publisher to the device thread's subscriber (a probe
 notification, ``eyehil.ready``, until it arrives) so that no command sent right after start is lost to
@@ -30,11 +31,13 @@ from eyehil.emulator.device.clock import Clock, RealTimeClock, make_clock
 from eyehil.emulator.device.frames import ExposureRenderer
 from eyehil.emulator.device.links.base import register_open, unregister
 from eyehil.emulator.device.pupil.backbone import MAX_MESSAGE_BYTES, Backbone, bind, make_socket
-from eyehil.emulator.device.pupil.capture import Capture
+from eyehil.emulator.device.pupil.capture import RECORD_MAX_BYTES, Capture
 from eyehil.emulator.device.pupil.core import DeviceThread
 from eyehil.emulator.device.pupil.datums import PupilTime, eye_windows
 from eyehil.emulator.device.pupil.frames import FramePublisher
 from eyehil.emulator.device.pupil.remote import PupilRemote
+from eyehil.emulator.device.pupil.world import MAX_WIDTH_PX, MIN_WIDTH_PX, WORLD_WIDTH_PX, WorldPublisher, WorldView
+from eyehil.emulator.device.render_pool import KINDS, MAX_RENDER_WORKERS
 from eyehil.emulator.device.subject import Subject
 from eyehil.emulator.render.renderer import DEFAULT_ROI
 from eyehil.protocols.native import MAX_RATE_HZ
@@ -56,16 +59,27 @@ class ServerOptions:
     settle_s: float = 0.35  # calibration: samples this soon after a target's onset are not used
     hwm: int = 1000  # ZeroMQ high-water marks (messages) of the backbone and the facade's sockets
     seed: int = 0  # image noise
-    record_dir: str | None = None  # where recordings keep their annotations (None: memory only)
+    record_dir: str | None = None  # where `R` writes recording folders (None: none, annotations in memory only)
+    record_max_bytes: int = RECORD_MAX_BYTES  # datums all recordings of this facade may write, in total
     lsl: bool = False  # also open an LSL outlet of type Gaze (`lsl_outlet`, needs pylsl)
     surface_name: str = "screen"  # the screen's surface topic: surfaces.<name>
     lsl_layout: str = "eyehil"  # or "pupil_relay": Pupil Capture's LSL relay name and channels
+    world_rate_hz: float = 30.0  # frame.world images per second (0: none)
+    world_width_px: int = WORLD_WIDTH_PX  # frame.world width; the height follows the screen's aspect ratio
+    render_workers: int = 0  # eye images rendered in this many processes or threads (0: on the frame thread)
+    render_kind: str = "process"  # or "thread" (`render_pool`)
 
     def __post_init__(self) -> None:
         if not 1 <= self.rate_hz <= MAX_RATE_HZ:
             raise ValueError(f"rate {self.rate_hz} Hz outside 1..{MAX_RATE_HZ}")
         if self.frame_format not in FRAME_FORMATS or not self.frame_rate_hz >= 0 or self.hwm < 1:
             raise ValueError(f"frame format must be one of {FRAME_FORMATS}, frame rate >= 0 and hwm >= 1")
+        if self.record_max_bytes < 0:
+            raise ValueError("record_max_bytes must be >= 0")
+        if not self.world_rate_hz >= 0 or not MIN_WIDTH_PX <= self.world_width_px <= MAX_WIDTH_PX:
+            raise ValueError(f"world rate must be >= 0 and world width {MIN_WIDTH_PX}..{MAX_WIDTH_PX} px")
+        if not 0 <= self.render_workers <= MAX_RENDER_WORKERS or self.render_kind not in KINDS:
+            raise ValueError(f"render workers must be in 0..{MAX_RENDER_WORKERS} and render kind one of {KINDS}")
 
 
 class PupilServer:
@@ -150,8 +164,13 @@ class PupilServer:
         frames = None
         if o.frame_rate_hz > 0:
             frames = FramePublisher(self.context, xsub, ExposureRenderer.for_subject(self.subject), windows,
-                                    seed=o.seed, hwm=o.hwm)
+                                    seed=o.seed, hwm=o.hwm, workers=o.render_workers, kind=o.render_kind)
             self._parts.append(frames)
+        world = None
+        if o.world_rate_hz > 0:
+            world = WorldPublisher(self.context, xsub, WorldView.of_screen(solver.scene.screen.size, o.world_width_px),
+                                   hwm=o.hwm)
+            self._parts.append(world)
         if o.lsl:
             import numpy as np
 
@@ -164,16 +183,19 @@ class PupilServer:
                                      pupil_mm=2.0 * float(np.asarray(solver.eye.pupil_radius).reshape(-1)[0]))
             self._parts.append(self.outlet)
         capture = Capture(solver.scene, eye_ids, self.time, lambda xy, t_us: device.show(xy, t_us),
-                          settle_s=o.settle_s, frame_format=o.frame_format, record_dir=o.record_dir)
+                          settle_s=o.settle_s, frame_format=o.frame_format, record_dir=o.record_dir,
+                          record_max_bytes=o.record_max_bytes)
         device = DeviceThread(self.context, xsub, sub, self.subject, self.clock, self.time, windows, capture,
                               rate_hz=o.rate_hz, frames=frames, outlet=self.outlet, hwm=o.hwm,
                               frame_every=max(1, round(o.rate_hz / o.frame_rate_hz)) if frames else 1,
-                              surface_name=o.surface_name)
+                              surface_name=o.surface_name, world=world,
+                              world_every=max(1, round(o.rate_hz / o.world_rate_hz)) if world else 1)
         self._parts.append(device.capture)
         self._parts.append(device)
         self.device = device
-        if frames is not None:
-            frames.start()
+        for part in (frames, world):
+            if part is not None:
+                part.start()
         device.start()
 
     # --- state and close --------------------------------------------------------------------------
@@ -190,6 +212,9 @@ class PupilServer:
         frames = next((p for p in self._parts if isinstance(p, FramePublisher)), None)
         if frames is not None:
             out.update(frames_published=frames.published, frames_dropped=frames.dropped)
+        world = next((p for p in self._parts if isinstance(p, WorldPublisher)), None)
+        if world is not None:
+            out.update(world_published=world.published, world_dropped=world.dropped)
         return out
 
     @property
@@ -225,5 +250,6 @@ def server_for(options: DeviceOptions, host: str = "127.0.0.1", port: int = 5002
             load_pylsl()
         except LslUnavailableError as exc:
             raise ValueError(str(exc)) from exc
+    server.setdefault("render_workers", options.render_workers)
     opts = ServerOptions(host=host, port=port, rate_hz=options.rate_hz, seed=options.seed, lsl=lsl, **server)
     return PupilServer(build_subject(options), make_clock(options.clock, options.speed), opts)

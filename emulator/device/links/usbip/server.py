@@ -33,6 +33,7 @@ import time
 from collections.abc import Callable
 from itertools import count
 
+from eyehil.emulator.device.links.listen import create_server
 from eyehil.emulator.device.links.usbip.control import CdcAcmControl
 from eyehil.emulator.device.links.usbip.session import UsbipSession, call_consumer, recv_exact
 from eyehil.protocols.usbip.descriptors import CdcAcmDescriptors, LineCoding
@@ -137,7 +138,7 @@ class UsbipCdcServer:
         if self._listener is not None or self._closing:
             raise RuntimeError("a server starts once")
         family = socket.AF_INET6 if ":" in self._address[0] else socket.AF_INET
-        listener = socket.create_server(self._address, family=family)
+        listener = create_server("usbip", *self._address, family=family)
         self._listener, self._wake = listener, socket.socketpair()
         self._bound_port = listener.getsockname()[1]
         self._accept_thread = threading.Thread(target=self._accept_loop, name="eyehil-usbip-accept", daemon=True)
