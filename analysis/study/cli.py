@@ -3,7 +3,8 @@
 Ray-traces the eyes through both published experiments, calibrates the host estimators, runs the
 statistics and writes summary.json, per_eye.csv, report.md and figures into --out. With --anatomy full the
 same eyes run a second time with the anatomy the paper left out (`eyehil.emulator.eye.anatomy.full_anatomy`,
-drawn with --seed) and the report compares the two per error category.
+drawn with --seed), and once more with each addition alone; the report compares the two per error category and
+breaks the change down by addition (`eyehil.analysis.study.breakdown`). It takes about six times as long.
 
 Ctrl-C stops the run at once (exit 130): the worker processes are terminated, and --out shows no file of an
 unfinished run (`eyehil.analysis.output_folder`).
@@ -51,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     from eyehil.analysis.study.findings import all_findings
     from eyehil.analysis.study.replication import run_study
     from eyehil.analysis.study.report import write_outputs
-    from eyehil.analysis.study.summary import anatomy_summary, summarise_study
+    from eyehil.analysis.study.summary import anatomy_breakdown, anatomy_summary, summarise_study
     from eyehil.emulator.eye.select import eyes_from_spec
 
     if args.workers is not None and args.workers < 1:
@@ -68,13 +69,15 @@ def run(args: argparse.Namespace) -> int:
     result.settings.update({"eyes": about, "seed": args.seed if args.eyes != "published" else None,
                             "anatomy": args.anatomy})
     summary = summarise_study(result)
-    full = None
+    full = alone = None
     if args.anatomy == "full":
-        full = _full_anatomy_run(eyes, args)
+        full, alone = _full_anatomy_runs(eyes, args)
         result.settings["anatomy_seed"] = args.seed
         summary["anatomy"] = anatomy_summary(result, full)
+        summary["anatomy_breakdown"] = anatomy_breakdown(result, alone, full)
     with staged_folder(out) as partial:
-        written = [out / p.relative_to(partial) for p in write_outputs(result, summary, partial, full)]
+        written = [out / p.relative_to(partial)
+                   for p in write_outputs(result, summary, partial, full, workers=args.workers)]
     findings = all_findings(summary)
     held = sum(f.holds for f in findings)
     both = ", paper and full anatomy" if full is not None else ""
@@ -91,6 +94,10 @@ def run(args: argparse.Namespace) -> int:
     for col, r in summary.get("anatomy", {}).items():
         print(f"  {col}: paper {r['paper']['mean']:.3f} +- {r['paper']['sd']:.3f}, full {r['full']['mean']:.3f} +- "
               f"{r['full']['sd']:.3f} deg; significant (full): {', '.join(r['full']['significant']) or 'none'}")
+        b = summary["anatomy_breakdown"][col]
+        most, change = b["largest_change"], b["change"][b["largest_change"]]
+        print(f"    {'no addition moves it by 0.005 deg; largest' if b['negligible'] else 'moved most by'}: "
+              f"{most} ({change:+.3f} deg alone)")
     print(f"  published findings reproduced: {held} of {len(findings)} (see report.md)")
     for f in findings:
         if not f.holds:
@@ -99,16 +106,15 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _full_anatomy_run(eyes, args: argparse.Namespace):
-    """The same eyes with `full_anatomy` (drawn with --seed), through the same study settings."""
-    import numpy as np
+def _full_anatomy_runs(eyes, args: argparse.Namespace):
+    """The same eyes with `full_anatomy` (drawn with --seed) and with each of its additions alone, through the
+    same study settings: (full run, {addition: run})."""
     from tqdm import tqdm
 
-    from eyehil.analysis.study.replication import run_study
-    from eyehil.emulator.eye.anatomy import full_anatomy
+    from eyehil.analysis.study.breakdown import COMPONENTS, run_anatomy
 
-    full_eyes = full_anatomy(eyes, np.random.default_rng(args.seed))
-    with tqdm(total=len(eyes), unit="eye", desc="study, full anatomy", disable=args.quiet) as bar:
-        return run_study(full_eyes, profile=args.profile, compare=None if args.compare == "none" else args.compare,
-                         head_positions=args.head_positions, workers=args.workers, scheduler=args.scheduler,
-                         progress=bar.update)
+    total = len(eyes) * (1 + len(COMPONENTS))
+    with tqdm(total=total, unit="eye", desc="study, full anatomy and each addition", disable=args.quiet) as bar:
+        return run_anatomy(eyes, args.seed, progress=bar.update, profile=args.profile,
+                           compare=None if args.compare == "none" else args.compare,
+                           head_positions=args.head_positions, workers=args.workers, scheduler=args.scheduler)

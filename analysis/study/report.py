@@ -4,34 +4,45 @@ from __future__ import annotations
 
 import csv
 import json
+import signal
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from eyehil.analysis.study import figures
+from eyehil.analysis.study.breakdown import COMPONENTS, GROUPS, NEGLIGIBLE_DEG
 from eyehil.analysis.study.findings import all_findings
 from eyehil.analysis.study.published import CONFIGURATIONS, blignaut_real, fischer_simulated, guestrin_real_deg
 from eyehil.analysis.study.replication import StudyResult
+from eyehil.analysis.study.runner import default_workers, worker_pool
 from eyehil.analysis.study.summary import best_function_errors, error_columns
+from eyehil.emulator.eye.model import EyeModel
 from eyehil.emulator.eye.population import study_parameters
 from eyehil.emulator.forward import simulate
 from eyehil.emulator.scene import load_scene
 
 
 def write_outputs(result: StudyResult, summary: dict[str, Any], out: Path,
-                  full: StudyResult | None = None) -> list[Path]:
+                  full: StudyResult | None = None, workers: int | None = None) -> list[Path]:
     """Everything a run produces, in `out` (created); `full`: the same eyes with full anatomy (`--anatomy full`,
-    compared in `summary["anatomy"]` and fig. 9)."""
+    compared in `summary["anatomy"]` and fig. 9). The figures are drawn by `workers` processes (default one per
+    core; 1: in this process)."""
     out.mkdir(parents=True, exist_ok=True)
     written = [out / "summary.json", out / "per_eye.csv"]
     (out / "summary.json").write_text(json.dumps(summary, indent=1, default=_json) + "\n", encoding="utf-8")
     _per_eye_csv(result, out / "per_eye.csv")
-    written += _figures(result, summary, out)
+    jobs = _figures(result, summary, out)
     if full is not None:
-        written.append(_anatomy_figure(result, full, summary, out / "fig9_anatomy.png"))
-    (out / "report.md").write_text(render_markdown(summary, [p.name for p in written if p.suffix == ".png"]),
-                                   encoding="utf-8")
+        jobs.append(partial(_anatomy_figure, result, full, summary, out / "fig9_anatomy.png"))
+    if "anatomy_breakdown" in summary:
+        jobs.append(partial(figures.breakdown, summary["anatomy_breakdown"], COMPONENTS, GROUPS,
+                            out / "fig10_anatomy_breakdown.png"))
+    written += _draw(jobs, workers)
+    pngs = [p.name for p in written if p.suffix == ".png"]
+    written += [figures.svg_of(p) for p in written if p.suffix == ".png"]
+    (out / "report.md").write_text(render_markdown(summary, pngs), encoding="utf-8")
     return [*written, out / "report.md"]
 
 
@@ -51,7 +62,23 @@ def _per_eye_csv(result: StudyResult, path: Path) -> None:
             writer.writerow([i + 1, *(f"{columns[k][i]:.6g}" for k in columns)])
 
 
-def _figures(result: StudyResult, summary: dict[str, Any], out: Path) -> list[Path]:
+def _draw(jobs: list[partial], workers: int | None) -> list[Path]:
+    """Run the figure jobs (each writes one figure and returns its PNG path), in order; in a pool of worker
+    processes when more than one worker is available (each figure is independent: the wall time halves on two
+    cores), else here. The pool is `runner.worker_pool`'s: Ctrl-C stops it at once (its docstring)."""
+    workers = min(workers or default_workers(), len(jobs))
+    if workers <= 1:
+        return [job() for job in jobs]
+    with worker_pool(workers) as pool:
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})  # no Ctrl-C while workers fork
+        try:
+            futures = [pool.submit(job) for job in jobs]
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+        return [f.result() for f in futures]
+
+
+def _figures(result: StudyResult, summary: dict[str, Any], out: Path) -> list[partial]:
     params = study_parameters(result.eyes)
     names = list(params)
     X = np.column_stack([params[k] for k in names])
@@ -61,28 +88,28 @@ def _figures(result: StudyResult, summary: dict[str, Any], out: Path) -> list[Pa
     table = {("ACD_from_anterior_cornea_mm" if k == "ACD_mm" else k): (v + params["CCT_mm"] if k == "ACD_mm" else v)
              for k, v in params.items()} | {"n_lens": result.eyes.lens_index}
     return [
-        figures.table4(table, fischer_simulated()["table4_parameter_distribution"], out / "table4.png"),
-        _features_figure(result, out / "fig3_features.png"),
-        figures.guestrin({"H1": result.h1, "H2": result.h2}, guestrin_real_deg(), fischer_simulated(),
-                         out / "fig4_guestrin.png"),
-        figures.sensitivity(X, names, {k: cols[k] for k in ("H1", "H2")}, summary["sensitivity"],
-                            out / "fig5_sensitivity_guestrin.png", "Guestrin: partial regression"),
-        figures.blignaut(best_function_errors(result.blignaut_errors), blignaut_real()["best_error"],
-                         {c: best[c]["model"] for c in CONFIGURATIONS}, out / "fig6_blignaut.png"),
-        figures.sensitivity(X, names, {k: cols[k] for k in CONFIGURATIONS}, summary["sensitivity"],
-                            out / "fig7_sensitivity_blignaut.png", "Blignaut: partial regression"),
+        partial(figures.table4, table, fischer_simulated()["table4_parameter_distribution"], out / "table4.png"),
+        partial(_features_figure, result.eyes, out / "fig3_features.png"),
+        partial(figures.guestrin, {"H1": result.h1, "H2": result.h2}, guestrin_real_deg(), fischer_simulated(),
+                out / "fig4_guestrin.png"),
+        partial(figures.sensitivity, X, names, {k: cols[k] for k in ("H1", "H2")}, summary["sensitivity"],
+                out / "fig5_sensitivity_guestrin.png", "Guestrin: partial regression"),
+        partial(figures.blignaut, best_function_errors(result.blignaut_errors), blignaut_real()["best_error"],
+                {c: best[c]["model"] for c in CONFIGURATIONS}, out / "fig6_blignaut.png"),
+        partial(figures.sensitivity, X, names, {k: cols[k] for k in CONFIGURATIONS}, summary["sensitivity"],
+                out / "fig7_sensitivity_blignaut.png", "Blignaut: partial regression"),
         *_profiles_figure(result, summary, out),
     ]
 
 
-def _profiles_figure(result: StudyResult, summary: dict[str, Any], out: Path) -> list[Path]:
+def _profiles_figure(result: StudyResult, summary: dict[str, Any], out: Path) -> list[partial]:
     compare = summary.get("guestrin_compare")
     if not compare:
         return []
     main = summary["guestrin"]["profile"]
     h1 = {main: result.profiles[main]["h1"], compare["profile"]: result.profiles[compare["profile"]]["h1"]}
     sens = {main: summary["sensitivity"], compare["profile"]: compare["sensitivity"]}
-    return [figures.profiles(h1, result.eyes.anterior_conic, sens, out / "fig8_estimator_profiles.png")]
+    return [partial(figures.profiles, h1, result.eyes.anterior_conic, sens, out / "fig8_estimator_profiles.png")]
 
 
 def _anatomy_figure(paper: StudyResult, full: StudyResult, summary: dict[str, Any], path: Path) -> Path:
@@ -95,13 +122,15 @@ def _anatomy_figure(paper: StudyResult, full: StudyResult, summary: dict[str, An
                            summary["anatomy"][column]["full"]["significant"], path, column)
 
 
-def _features_figure(result: StudyResult, path: Path) -> Path:
+def _features_figure(eyes: EyeModel, path: Path) -> Path:
     """Fig. 3 for the two eyes of most and least negative Q_ac (right eye, Blignaut scene)."""
-    q = result.eyes.anterior_conic
+    q = eyes.anterior_conic
     pick = [int(np.argmin(q)), int(np.argmax(q))]
-    f = simulate(result.eyes[pick], load_scene("blignaut2014"))
-    labels = [f"eye {i + 1} (Q_ac {q[i]:+.3f})" for i in pick]
-    return figures.features(f.pupil_centre_px[:, 0, 0], f.glint_px[:, 0, 0, :, 0, :], labels, path)
+    f = simulate(eyes[pick], load_scene("blignaut2014"))
+    labels = [f"eye {i + 1} (Q_ac {figures.signed(float(q[i]))})" for i in pick]
+    title = (f"Fig. 3: image features of the right eye over the {f.pupil_centre_px.shape[3]} Blignaut targets, "
+             "for the eyes of most and least negative Q_ac")
+    return figures.features(f.pupil_centre_px[:, 0, 0], f.glint_px[:, 0, 0, :, 0, :], labels, path, title)
 
 
 def _row(*cells: Any) -> str:
@@ -142,6 +171,7 @@ def render_markdown(s: dict[str, Any], pngs: list[str]) -> str:
                           f"{g['real'][k]['mean']:.3f} +- {g['real'][k]['sd']:.3f}"))
     lines += _profiles_section(s)
     lines += _anatomy_section(s)
+    lines += _breakdown_section(s)
     lines += _blignaut_tables(s)
     lines += _sensitivity_table(s)
     lines += _univariate_table(s)
@@ -246,6 +276,67 @@ def _anatomy_section(s: dict[str, Any]) -> list[str]:
                           f"{f['mean'] - p['mean']:+.3f} / {f['sd'] - p['sd']:+.3f}",
                           ", ".join(p["significant"]) or "none", ", ".join(f["significant"]) or "none"))
     return lines
+
+
+def _breakdown_section(s: dict[str, Any]) -> list[str]:
+    b = s.get("anatomy_breakdown")
+    if not b:
+        return []
+    labels = list(COMPONENTS.values())
+    lines = ["", "## Which added anatomy moves the errors", "",
+             "The same eyes with each addition of the full anatomy alone (the deviates it has in the full run; "
+             "`eyehil.analysis.study.breakdown`). Change of the mean error from the paper anatomy (deg); the "
+             "interaction is what the additions do only together, so paper + the changes + interaction = full.", "",
+             _row("error", "paper mean", *(f"+ {c}" for c in labels), "interaction", "full mean", "moves it most"),
+             _row(*["---"] * (len(labels) + 5))]
+    for col, r in b.items():
+        most = f"none ({COMPONENTS[r['largest_change']]}: < {NEGLIGIBLE_DEG} deg)" if r["negligible"] else \
+            COMPONENTS[r["largest_change"]]
+        lines.append(_row(col, f"{r['runs']['paper']['mean']:.3f}", *(_change(r["change"][c]) for c in COMPONENTS),
+                          _change(r["interaction"]), f"{r['runs']['full']['mean']:.3f}", most))
+    lines += ["", "SD of the error over the eyes (deg), each addition alone:", "",
+              _row("error", "paper", *labels, "full"), _row(*["---"] * (len(labels) + 3))]
+    for col, r in b.items():
+        lines.append(_row(col, *(f"{r['runs'][k]['sd']:.3f}" for k in ("paper", *COMPONENTS, "full"))))
+    lines += ["", "Where the full anatomy's between-subject spread comes from: the share of the variance of each eye's "
+              "error explained by each group of per-eye parameters (the Shapley/LMG split of the R^2 of a linear "
+              "regression on the study's 11 parameters, the astigmatism J0, J45, |J| of both corneal surfaces and "
+              "the pupil's nasal, superior and total decentration; the shares sum to R^2). The elliptical stop and "
+              "the cornea tilt are the same in every eye: they move the mean but explain no spread.", "",
+              _row("error", "SD (full)", *(f"{g} (%)" for g in GROUPS), "unexplained (%)", "R^2", "eyes"),
+              _row(*["---"] * (len(GROUPS) + 5))]
+    for col, r in b.items():
+        v = r["variance"]
+        if "skipped" in v:
+            lines.append(_row(col, f"{r['runs']['full']['sd']:.3f}", *(["-"] * len(GROUPS)), "-", "-", v["skipped"]))
+            continue
+        lines.append(_row(col, f"{np.sqrt(v['variance']):.3f}", *(f"{100 * v['shares'][g]:.0f}" for g in GROUPS),
+                          f"{100 * v['unexplained']:.0f}", f"{v['r_squared']:.2f}", v["eyes"]))
+    lines += ["", "In words:", ""] + [_breakdown_sentence(col, r) for col, r in b.items()]
+    return lines
+
+
+def _change(value: float) -> str:
+    """A change in deg with its sign, "0.000" when it rounds to zero (no "-0.000")."""
+    return "0.000" if round(value, 3) == 0 else f"{value:+.3f}"
+
+
+def _breakdown_sentence(col: str, r: dict[str, Any]) -> str:
+    """What moves the mean of one error category most and what explains most of its spread (a list item)."""
+    c = r["largest_change"]
+    if r["negligible"]:
+        text = (f"- {col}: no addition moves the mean by {NEGLIGIBLE_DEG} deg or more (full - paper "
+                f"{_change(r['total_change'])})")
+    else:
+        text = (f"- {col}: {COMPONENTS[c]} moves the mean most ({_change(r['change'][c])} deg of "
+                f"{_change(r['total_change'])} full - paper)")
+    v = r["variance"]
+    if "shares" in v:
+        added = {g: v["shares"][g] for g in GROUPS if g != GROUPS[0]}
+        top = max(added, key=added.get)
+        text += (f"; of its spread between subjects (SD {np.sqrt(v['variance']):.3f} deg) {top} explains "
+                 f"{100 * added[top]:.0f}%, the paper anatomy {100 * v['shares'][GROUPS[0]]:.0f}%")
+    return text + "."
 
 
 def _univariate_table(s: dict[str, Any]) -> list[str]:

@@ -10,7 +10,9 @@
   bias=False gives the adjusted G1 = g1 sqrt(n (n - 1)) / (n - 2).
 - Sensitivity regression: the parameter columns are z-scored with the sample SD (ddof=1, as
   Matlab's `zscore`), an error column is regressed on them with an intercept by ordinary least
-  squares (statsmodels OLS), p-values from two-sided t-tests of each coefficient; the model is refit
+  squares (numpy: coefficients by the pseudo-inverse, standard errors sqrt(diag(s^2 (X'X)^+)) with
+  s^2 = SS_res / (n - k), as statsmodels OLS computes them; tests/test_stats.py compares the two), p-values
+  from two-sided t-tests of each coefficient; the model is refit
   on the parameters with p < alpha (0.05). Coefficients are in units of the error per SD of the
   parameter. R^2 = 1 - SS_res / SS_tot.
 - Univariate sensitivity: each z-scored parameter alone, error = b0 + b1 z + e (OLS), with its own
@@ -27,7 +29,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import statsmodels.api as sm
 from scipy import stats
 
 
@@ -146,12 +147,20 @@ def ols(y: np.ndarray, X: np.ndarray, names: Sequence[str]) -> OLSFit:
     X = np.asarray(X, dtype=float)
     if X.shape != (len(y), len(names)):
         raise ValueError(f"X must have shape ({len(y)}, {len(names)}), got {X.shape}")
+    y = np.asarray(y, dtype=float)
     design = np.column_stack([np.ones(len(y)), X])
-    res = sm.OLS(np.asarray(y, dtype=float), design).fit()
-    return OLSFit(
-        ("const", *names), np.asarray(res.params), np.asarray(res.bse), np.asarray(res.tvalues),
-        np.asarray(res.pvalues), float(res.rsquared) if X.shape[1] else 0.0, float(res.df_resid),
-    )
+    pinv = np.linalg.pinv(design)
+    coef = pinv @ y
+    residual = y - design @ coef
+    df_resid = float(len(y) - np.linalg.matrix_rank(design))
+    sigma2 = float(residual @ residual) / df_resid
+    se = np.sqrt(sigma2 * np.diag(pinv @ pinv.T))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = coef / se
+    p = 2.0 * stats.t.sf(np.abs(t), df_resid)
+    centred = y - y.mean()
+    r2 = 1.0 - float(residual @ residual) / float(centred @ centred) if X.shape[1] else 0.0
+    return OLSFit(("const", *names), coef, se, t, p, r2, df_resid)
 
 
 @dataclass(frozen=True)

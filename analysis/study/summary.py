@@ -10,7 +10,11 @@ text; `r_squared` is that of the refit on the significant ones, as the paper rep
 one-parameter fits the study's code ran); `guestrin_compare` {profile, H1, H2: {mean, sd, skewness},
 sensitivity: {H1, H2: as above}} for the comparison profile on the same features (None without one);
 `anatomy` (only with `--anatomy full`, `anatomy_summary`) {category: {paper, full: {mean, sd, significant}}} for
-the Guestrin H1/H2 of each profile and the Blignaut best-function errors, the same eyes with paper and full anatomy.
+the Guestrin H1/H2 of each profile and the Blignaut best-function errors, the same eyes with paper and full anatomy;
+`anatomy_breakdown` (with `--anatomy full`, `anatomy_breakdown`) {category: {runs: {paper, astigmatism, decentration,
+stop, tilt, full: {mean, sd}}, change: {addition: change of the mean alone}, total_change, interaction,
+largest_change, variance: {variance, r_squared, shares: {group: share}, unexplained, eyes}}}
+(`eyehil.analysis.study.breakdown`).
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from eyehil.analysis.study import stats
+from eyehil.analysis.study.breakdown import breakdown
 from eyehil.analysis.study.published import CONFIGURATIONS, blignaut_real, guestrin_real_deg
 from eyehil.analysis.study.replication import StudyResult
 from eyehil.drivers.gaze.forms import MODELS
@@ -147,6 +152,13 @@ def anatomy_summary(paper: StudyResult, full: StudyResult) -> dict[str, Any]:
             s = stats.summarise(y[np.isfinite(y)])
             out.setdefault(col, {})[name] = {"mean": s.mean, "sd": s.sd, "significant": sens[col]["significant"]}
     return out
+
+
+def anatomy_breakdown(paper: StudyResult, alone: dict[str, StudyResult], full: StudyResult) -> dict[str, Any]:
+    """Which addition moves each error category (`breakdown.breakdown`): the same eyes with the paper anatomy, each
+    addition alone and the full anatomy."""
+    return breakdown(anatomy_columns(paper), {k: anatomy_columns(r) for k, r in alone.items()},
+                     anatomy_columns(full), full.eyes)
 
 
 def summarise_study(result: StudyResult) -> dict[str, Any]:

@@ -8,10 +8,16 @@ full-sensor pixels (OpenCV convention: origin at the top-left pixel centre, x ri
   the stop) is interpolated by its trigonometric (Fourier) series into a dense closed curve, stored as
   a polar table r(theta) about the fitted ellipse centre, the ground truth `Features.pupil_centre_px`.
   Samples with blocked boundary points use the fitted ellipse instead.
-- limbus: the corneal edge, the circle of radius `EyeModel.limbus_radius` r_l at the anterior sag depth
-  w = r_l^2 / (R (1 + sqrt(1 - (1 + Q) r_l^2 / R^2))) about the optic axis a: scene points
-  apex - w a + r_l (cos t u + sin t v), u and v perpendicular to a. Its image is an ellipse, fitted to
-  24 projected points (exact for an undistorted pinhole camera).
+- limbus: the corneal edge, where the anterior cornea meets the sclera: the anterior surface's points at
+  distance `EyeModel.limbus_radius` r_l from its own axis (the edge of the cap `eye.surfaces.biconic_cornea`
+  traces), surface coordinates (x', y') = r_l (cos t, sin t) at the biconic sag of each meridian, so a toric
+  cornea's edge lies deeper in its flatter meridian, and a tilted or displaced cornea carries it along. In the
+  eye-local frame these are placed by the sample's pose (`fixation.posed` of the Features' azimuth, elevation
+  and torsion) and head position, as the forward model places the cornea. For a cornea of revolution (R, Q)
+  this is the circle at the sag depth w = r_l^2 / (R (1 + sqrt(1 - (1 + Q) r_l^2 / R^2))) about the optic
+  axis. The image is the least-squares ellipse of 24 projected points (exact for the circle and an
+  undistorted pinhole camera; the edge of a toric cornea is not planar, its image departs from an ellipse by
+  far less than a pixel).
 - glints: `Features.glint_px` and `Features.glint_valid`.
 - eyelids: margins fixed to the head, between a nasal and a temporal canthus (`Eyelids`, eye frame mm,
   right-eye numbers with x nasal, mirrored for left eyes). At eye-frame x the margin height is
@@ -32,8 +38,10 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from eyehil.emulator.eye.model import EyeModel
+from eyehil.emulator.eye.surfaces import biconic_cornea
 from eyehil.emulator.features import Features
-from eyehil.emulator.optics.conic import Conic
+from eyehil.emulator.fixation import eye_centres, posed
+from eyehil.emulator.forward import Placement
 from eyehil.emulator.optics.ellipse import fit_ellipse
 from eyehil.emulator.scene import Scene
 
@@ -98,8 +106,7 @@ def eye_outlines(features: Features, eyes: EyeModel, scene: Scene, *, blink: flo
     lids = lids or Eyelids()
     eyes = eyes.as_batch()
     pad = (slice(None), None, None, None)
-    limbus = limbus_ellipse(features, eyes.anterior_radius[pad], eyes.anterior_conic[pad],
-                            eyes.limbus_radius[pad], scene)
+    limbus = limbus_ellipse(features, eyes, scene)
     upper, lower = lid_margins(features, scene, lids, np.clip(blink, 0.0, 1.0))
     theta, r, dr = pupil_polar(features.pupil_points_px, features.pupil_points_valid, features.pupil_centre_px,
                                features.pupil_axes_px, features.pupil_angle_deg)
@@ -113,20 +120,28 @@ def eye_outlines(features: Features, eyes: EyeModel, scene: Scene, *, blink: flo
     )
 
 
-def limbus_ellipse(features: Features, radius: np.ndarray, conic: np.ndarray, limbus_radius: np.ndarray,
-                   scene: Scene):
-    """The image ellipse (`optics.ellipse.Ellipse`, px) of the corneal edge of each sample."""
-    axis = features.optic_axis
-    u = np.cross([0.0, 1.0, 0.0], axis)
-    u /= np.linalg.norm(u, axis=-1, keepdims=True)
-    v = np.cross(axis, u)
-    sag, _ = Conic(0.0, radius, conic, limbus_radius * 2.0).sag(limbus_radius**2)
-    t = 2.0 * np.pi * np.arange(LIMBUS_POINTS) / LIMBUS_POINTS
-    ring = np.cos(t)[:, None] * u[..., None, :] + np.sin(t)[:, None] * v[..., None, :]
-    centre = features.apex - sag[..., None] * axis
-    points = centre[..., None, :] + limbus_radius[..., None, None] * ring
-    px, _ = scene.camera.project(points)
+def limbus_ellipse(features: Features, eyes: EyeModel, scene: Scene):
+    """The image ellipse (`optics.ellipse.Ellipse`, px, shape (E, S, H, T)) of the corneal edge of each sample."""
+    px, _ = scene.camera.project(limbus_points(features, eyes, scene))
     return fit_ellipse(px)
+
+
+def limbus_points(features: Features, eyes: EyeModel, scene: Scene, n: int = LIMBUS_POINTS) -> np.ndarray:
+    """(E, S, H, T, n, 3) scene-frame points (mm) of the corneal edge of each sample (module docstring), at the
+    surface angles t = 2 pi k / n of the anterior cornea's first principal meridian frame."""
+    eyes = eyes.as_batch()
+    t = 2.0 * np.pi * np.arange(n) / n
+    out = np.empty((*features.pupil_valid.shape, n, 3))
+    for s, side in enumerate(features.sides):
+        eye = eyes.with_laterality(side)
+        anterior = biconic_cornea(eye)[0].reshaped(1)
+        q = eye.limbus_radius[:, None, None] * np.stack([np.cos(t), np.sin(t)], axis=-1)  # (E, n, 2)
+        local, _ = anterior.point(q)  # on the cap's edge: existence is not required there
+        centres = tuple(c[:, None, None, :] for c in eye_centres(eye))
+        a, b = posed(centres, features.azimuth_deg[:, s], features.elevation_deg[:, s], features.torsion_deg[:, s])
+        p_eye = np.einsum("ehtij,enj->ehtni", a, local) + b[..., None, :]
+        out[:, s] = Placement.of(tuple(features.head_positions), scene.apex(side)).eye_to_scene(p_eye)
+    return out
 
 
 def lid_margins(features: Features, scene: Scene, lids: Eyelids, blink: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
