@@ -24,6 +24,7 @@ import numpy as np
 
 from eyehil.emulator.optics.biconic import Biconic
 from eyehil.emulator.optics.conic import Conic, Plane
+from eyehil.emulator.optics.fused import trace_conic
 from eyehil.emulator.optics.newton import newton2d
 from eyehil.emulator.optics.rays import _dot, refract, unit
 
@@ -75,6 +76,16 @@ def solve_exit_points(optics: CorneaOptics, camera: np.ndarray, target: np.ndarr
     def residual(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         p, ok = trace_into_eye(optics, q, source=camera)
         return p[..., :2] - target[..., :2], ok
+
+    if isinstance(optics.anterior, Conic) and isinstance(optics.posterior, Conic):
+        eta1 = np.asarray(optics.n_air, dtype=float) / np.asarray(optics.n_cornea, dtype=float)
+        eta2 = np.asarray(optics.n_cornea, dtype=float) / np.asarray(optics.n_aqueous, dtype=float)
+        source = (camera[..., 0], camera[..., 1], camera[..., 2])
+
+        def residual(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # the same numbers, traced component-wise
+            x, y, ok = trace_conic(optics.anterior, optics.posterior, optics.pupil_plane, eta1, eta2,
+                                   q[..., 0], q[..., 1], source)
+            return np.stack([x - target[..., 0], y - target[..., 1]], axis=-1), ok
 
     sol = newton2d(residual, _first_guess(optics, camera, target), max_step=0.5)
     a, _ = optics.anterior.point(sol.q)
