@@ -110,3 +110,51 @@ def test_line_of_sight_makes_the_fovea_angle_and_crosses_the_stop_centre(eyes) -
     # posterior pole (it sits 1-2 mm off the axis on a retina of radius ~11 mm: r^2 / 2R ~ 0.1-0.2 mm)
     assert np.all(los.fovea[:, 0] < 0) and np.all(los.fovea[:, 1] < 0)
     assert np.all(los.fovea[:, 2] > -eyes.axial_length) and np.all(los.fovea[:, 2] < -eyes.axial_length + 0.3)
+
+
+def test_component_wise_pupil_trace_equals_the_general_trace_bit_for_bit(eyes) -> None:
+    """`fused.trace_conic` (the pupil solve's hot loop) gives exactly the numbers of `trace_into_eye`, including
+    rays that miss: exit points spread over and beyond the cornea, cameras near and far, off axis."""
+    from eyehil.emulator.optics.fused import trace_conic
+    from eyehil.emulator.optics.pupil import trace_into_eye
+
+    optics = cornea_optics(eyes, Media.cauchy(850), 2)
+    q = RNG.uniform(-7.0, 7.0, (len(eyes), 40, 50, 2))
+    cam = np.stack([RNG.uniform(-300, 300, (40, 1)), RNG.uniform(-300, 300, (40, 1)),
+                    RNG.uniform(5, 900, (40, 1))], axis=-1)
+    p, ok = trace_into_eye(optics, q, source=cam)
+    eta1 = np.asarray(optics.n_air) / np.asarray(optics.n_cornea)
+    eta2 = np.asarray(optics.n_cornea) / np.asarray(optics.n_aqueous)
+    with np.errstate(invalid="ignore"):
+        x, y, ok2 = trace_conic(optics.anterior, optics.posterior, optics.pupil_plane, eta1, eta2, q[..., 0],
+                                q[..., 1], (cam[..., 0], cam[..., 1], cam[..., 2]))
+    assert 0.2 < ok.mean() < 0.95  # both outcomes exercised
+    np.testing.assert_array_equal(ok2, ok)
+    np.testing.assert_array_equal(np.stack([x, y], axis=-1)[ok], p[ok][:, :2])
+
+
+def test_newton_on_a_subset_equals_the_full_batch_bit_for_bit(eyes) -> None:
+    """newton2d(subset=True) evaluates only the moving elements late in the solve; the answer is unchanged."""
+    from eyehil.emulator.eye.surfaces import pupil_centre
+    from eyehil.emulator.optics import newton as newton_module
+    from eyehil.emulator.optics.pupil import _conic_residual, _first_guess
+
+    optics = cornea_optics(eyes, Media.cauchy(850), 2)
+    boundary = pupil_boundary(pupil_centre(eyes)[..., :2], eyes.pupil_radius, -eyes.stop_depth, 30)[:, None]
+    cam = np.array([[5.0, -150.0, 600.0], [-40.0, 60.0, 450.0]])[None, :, None]
+    q0 = _first_guess(optics, cam, boundary)
+    q0[0, 0, 0, :3] += 0.8  # three points start far off: they still move when the rest have converged
+    f = _conic_residual(optics, cam, boundary, q0.shape[:-1])
+    calls: list[int] = []
+
+    def counted(q, index):
+        calls.append(q[..., 0].size)
+        return f(q, index)
+
+    sub = newton_module.newton2d(counted, q0, max_step=0.5, subset=True)
+    full = newton_module.newton2d(lambda q: f(q, None), q0, max_step=0.5)
+    assert min(calls) < q0[..., 0].size / 2  # the subset path ran
+    np.testing.assert_array_equal(sub.q, full.q)
+    np.testing.assert_array_equal(sub.residual, full.residual)
+    np.testing.assert_array_equal(sub.ok, full.ok)
+    assert sub.iterations == full.iterations

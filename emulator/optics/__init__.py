@@ -5,5 +5,6 @@ each module states).
   decentred;
 - `rays`: refraction and reflection (vector forms); `newton`: a batched two-unknown Newton iteration;
 - `glint`: the corneal reflection of an LED into the camera; `pupil`: the apparent pupil through the cornea;
+  `fused`: the pupil solve's ray trace through conic corneas, component-wise (the hot loop);
 - `camera`: the pinhole camera (head frame mm -> image px, OpenCV convention); `ellipse`: batched ellipse fit.
 """

@@ -24,6 +24,7 @@ import numpy as np
 
 from eyehil.emulator.optics.biconic import Biconic
 from eyehil.emulator.optics.conic import Conic, Plane
+from eyehil.emulator.optics.fused import trace_conic
 from eyehil.emulator.optics.newton import newton2d
 from eyehil.emulator.optics.rays import _dot, refract, unit
 
@@ -76,11 +77,35 @@ def solve_exit_points(optics: CorneaOptics, camera: np.ndarray, target: np.ndarr
         p, ok = trace_into_eye(optics, q, source=camera)
         return p[..., :2] - target[..., :2], ok
 
-    sol = newton2d(residual, _first_guess(optics, camera, target), max_step=0.5)
+    q0 = _first_guess(optics, camera, target)
+    if isinstance(optics.anterior, Conic) and isinstance(optics.posterior, Conic):
+        sol = newton2d(_conic_residual(optics, camera, target, q0.shape[:-1]), q0, max_step=0.5, subset=True)
+    else:
+        sol = newton2d(residual, q0, max_step=0.5)
+
     a, _ = optics.anterior.point(sol.q)
     miss = np.linalg.norm(sol.residual, axis=-1)
     valid = sol.ok & (miss <= PUPIL_TOLERANCE_MM)
     return ExitPoints(point=a, residual_mm=miss, valid=valid)
+
+
+def _conic_residual(optics: CorneaOptics, camera: np.ndarray, target: np.ndarray, batch: tuple[int, ...]):
+    """The residual of `solve_exit_points` for conic corneas, traced component-wise (`fused.trace_conic`, the
+    same numbers as `trace_into_eye`) and evaluable on a subset of the batch (`newton2d(subset=True)`)."""
+    eta1 = np.asarray(optics.n_air, dtype=float) / np.asarray(optics.n_cornea, dtype=float)
+    eta2 = np.asarray(optics.n_cornea, dtype=float) / np.asarray(optics.n_aqueous, dtype=float)
+    ant, post = optics.anterior, optics.posterior
+    fields = (ant.apex, ant.radius, ant.conic, ant.aperture, post.apex, post.radius, post.conic, post.aperture,
+              np.asarray(optics.pupil_plane.z0), eta1, eta2, camera[..., 0], camera[..., 1], camera[..., 2],
+              target[..., 0], target[..., 1])
+
+    def residual(q: np.ndarray, index: tuple[np.ndarray, ...] | None) -> tuple[np.ndarray, np.ndarray]:
+        f = fields if index is None else tuple(np.broadcast_to(v, batch)[index] for v in fields)
+        x, y, ok = trace_conic(Conic(*f[0:4]), Conic(*f[4:8]), Plane(f[8]), f[9], f[10], q[..., 0], q[..., 1],
+                               f[11:14])
+        return np.stack([x - f[14], y - f[15]], axis=-1), ok
+
+    return residual
 
 
 def _first_guess(optics: CorneaOptics, camera: np.ndarray, target: np.ndarray) -> np.ndarray:
