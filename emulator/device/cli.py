@@ -171,7 +171,7 @@ def run(args: argparse.Namespace) -> int:
         from eyehil.emulator.scene import load_scene
 
         print(f"geometry: {write_geometry(load_scene(opts.scene), args.write_geometry)}", flush=True)
-    stop = threading.Event()
+    stop, interrupted = threading.Event(), False
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())  # SIGTERM stops cleanly, like Ctrl-C
     try:
         with make_runner(opts, args) as runner, contextlib.ExitStack() as view:
@@ -181,8 +181,10 @@ def run(args: argparse.Namespace) -> int:
                 view.callback(*_view_starter(args)(runner.url, opts, args, None if core is None else ViewBlink(core)))
             print(f"eyehil emulate: {opts.mode} device, scene {opts.scene}, eyes {opts.eyes}[{opts.eye}], "
                   f"script {opts.script}, {opts.clock} clock; Ctrl-C stops", flush=True)
-            with contextlib.suppress(KeyboardInterrupt):
+            try:
                 stop.wait(args.duration)
+            except KeyboardInterrupt:
+                interrupted = True  # the device and its links close first, then the usual exit for Ctrl-C
     finally:
         signal.signal(signal.SIGTERM, previous)
-    return 0
+    return 130 if interrupted else 0  # SIGTERM and --duration end normally

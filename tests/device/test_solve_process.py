@@ -205,7 +205,7 @@ def test_a_killed_device_leaves_no_worker(released: HeldSolver) -> None:
 
 def test_ctrl_c_stops_the_emulator_and_its_worker() -> None:
     """`eyehil emulate` on the real clock gets a STIMULUS (its worker starts), then a terminal's Ctrl-C (SIGINT
-    to the whole process group): it exits 0, its worker is gone, and nothing printed a traceback."""
+    to the whole process group): it exits 130 (issue 17), its worker is gone, and nothing printed a traceback."""
     proc = subprocess.Popen([sys.executable, "-m", "eyehil", "emulate", "--link", "tcp", "--duration", "300"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     workers: list[int] = []
@@ -216,7 +216,7 @@ def test_ctrl_c_stops_the_emulator_and_its_worker() -> None:
         tracker.stimulus(1, 30.0, 40.0)
         _until(lambda: bool(workers.extend(_solve_workers(proc.pid)) or workers), "the solve worker")
         os.killpg(proc.pid, signal.SIGINT)
-        assert proc.wait(GENEROUS_S) == 0
+        assert proc.wait(GENEROUS_S) == 130
         _, err = proc.communicate(timeout=GENEROUS_S)
         assert "Traceback" not in err, err
         _until(lambda: not any(_running(w) for w in workers), "the worker to exit")
