@@ -131,7 +131,7 @@ def run_info(args: argparse.Namespace) -> int:
     print(f"{info.model} {info.firmware_version}, protocol {info.protocol_min}..{info.protocol_max}")
     print(f"  camera {info.camera_width} x {info.camera_height} px, {info.led_count} LED(s), rate "
           f"{info.sample_rate_hz} Hz ({info.min_rate_hz}..{info.max_rate_hz}), max payload {info.max_payload}")
-    print(f"  capabilities {info.capabilities!r}")
+    print(f"  capabilities {', '.join(c.name.lower() for c in type(info.capabilities) if c in info.capabilities)}")
     print(f"  clock: device - host = {sync.offset_us / 1e6:+.6f} s, round trip {sync.rtt_us:.0f} us")
     print("  status " + ", ".join(f"{k} {int(v)}" for k, v in asdict(status).items() if v))
     return 0

@@ -34,7 +34,8 @@ def test_emulate_on_a_pty_prints_its_path(capsys) -> None:
 def test_info_and_stream(capsys) -> None:
     url = f"loop://?{query(rate=100)}"
     assert main(["info", url]) == 0
-    assert "eyehil virtual tracker" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "eyehil virtual tracker" in out and "capabilities features, frames, roi" in out and "<" not in out
     assert main(["stream", url, "--duration", "0.2", "--every", "5"]) == 0
     out = capsys.readouterr().out
     assert out.count("right pupil") == 5 and "21 samples" in out
