@@ -20,7 +20,7 @@ the eyes) between the directions to the estimate and to the target, degrees.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -153,9 +153,11 @@ def configure_for(tracker: Tracker, method: str, geometry: TrackerGeometry, eye:
 
 
 def calibrate(tracker: Tracker, geometry: TrackerGeometry, method: str, plan: Plan | None = None, *,
-              eye: Eye = Eye.RIGHT, model: int = 3, rate_hz: int | None = None, frames: bool = False) -> Result:
+              eye: Eye = Eye.RIGHT, model: int = 3, rate_hz: int | None = None, frames: bool = False,
+              progress: Callable[[int, int], None] | None = None) -> Result:
     """Configure, stream, run `plan`'s targets, fit on the calibration ones, validate on the others; stop.
-    With `frames`, the device streams images only and the host detects the features (frames-only mode)."""
+    With `frames`, the device streams images only and the host detects the features (frames-only mode).
+    `progress(done, total)` is told after each target."""
     plan = plan or Plan.default(geometry.screen)
     estimator = estimator_for(method, geometry, eye, model)
     n_leds = configure_for(tracker, method, geometry, eye, rate_hz, frames)
@@ -163,7 +165,11 @@ def calibrate(tracker: Tracker, geometry: TrackerGeometry, method: str, plan: Pl
     reader = reader_for(tracker, frames, geometry.leds[:, :2])
     tracker.start()
     try:
-        fixations = [collect_fixation(tracker, i, xy, geometry.screen, plan, reader) for i, xy in enumerate(targets)]
+        fixations = []
+        for i, xy in enumerate(targets):
+            fixations.append(collect_fixation(tracker, i, xy, geometry.screen, plan, reader))
+            if progress is not None:
+                progress(i + 1, len(targets))
     finally:
         tracker.stop()
     samples = fixation_samples(fixations, method, eye, n_leds)

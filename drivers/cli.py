@@ -77,6 +77,7 @@ def register_calibrate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--collect", type=float, default=0.2, help="s averaged per target (default 0.2)")
     p.add_argument("--gaze-seconds", type=float, default=1.0, help="then stream gaze this long (default 1)")
     p.add_argument("--frames", action="store_true", help="stream camera images only; the host detects the features")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=run_calibrate)
 
 
@@ -204,15 +205,37 @@ def run_calibrate(args: argparse.Namespace) -> int:
     with _open(args) as tracker:
         plan = Plan.default(geometry.screen, settle_s=args.settle, collect_s=args.collect)
         result = calibrate(tracker, geometry, args.method, plan, model=args.model, rate_hz=args.rate,
-                           frames=args.frames)
-        print(f"{args.method}: calibrated on {len(plan.calibration_mm)} targets; parameters "
-              f"{ {k: v for k, v in result.calibration.params.items() if k != 'coefficients'} }")
+                           frames=args.frames, progress=None if args.quiet else _target_progress)
+        params = ", ".join(f"{k} {_readable(k, v)}" for k, v in result.calibration.params.items()
+                           if k != "coefficients")
+        print(f"{args.method}: calibrated on {len(plan.calibration_mm)} targets; {params}")
         for target, est, err in zip(plan.validation_mm, result.estimates_mm, result.errors_deg, strict=True):
             print(f"  validation target ({target[0]:+7.1f}, {target[1]:+7.1f}) mm -> ({est[0]:+7.1f}, {est[1]:+7.1f})"
                   f" mm, error {err:.3f} deg")
         print(f"  mean validation error {result.mean_error_deg:.3f} deg")
         _stream_gaze(tracker, result, args.gaze_seconds, reader_for(tracker, args.frames, geometry.leds[:, :2]))
     return 0
+
+
+def _readable(name: str, value: object) -> str:
+    """A fitted parameter for a person: a Blignaut form as its terms, numbers to 4 significant digits, mappings
+    and lists unpacked."""
+    if name.endswith("_form"):
+        from eyehil.drivers.gaze.forms import describe
+
+        return f"({describe(value)})"  # type: ignore[arg-type]
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    if isinstance(value, dict):
+        return "(" + ", ".join(f"{k} {_readable(k, v)}" for k, v in value.items()) + ")"
+    if isinstance(value, list | tuple):
+        return "/".join(_readable(name, v) for v in value)
+    return str(getattr(value, "tolist", lambda: value)())
+
+
+def _target_progress(done: int, total: int) -> None:
+    """One stderr line per target (a calibration takes a second or more per target)."""
+    print(f"eyehil calibrate: target {done}/{total}", file=sys.stderr, flush=True)
 
 
 def _stream_gaze(tracker: Tracker, result, seconds: float, reader: Tracker | FrameReader) -> None:

@@ -45,8 +45,15 @@ def test_calibrate(geometry, capsys) -> None:
     url = f"loop://?{query(scene='blignaut2014', rate=250)}"
     assert main(["calibrate", url, "--method", "blignaut", "--geometry", str(geometry), "--settle", "0.35",
                  "--collect", "0.02", "--gaze-seconds", "0.1"]) == 0
-    out = capsys.readouterr().out
+    captured = capsys.readouterr()
+    out = captured.out
     assert out.count("validation target") == 4 and "mean validation error" in out and "gaze t=" in out
+    assert "x_form (1 + x + y" in out and "{" not in out  # readable parameters, not a dict
+    targets = [line for line in captured.err.splitlines() if line.startswith("eyehil calibrate: target ")]
+    assert targets[-1].endswith(f"{len(targets)}/{len(targets)}") and len(targets) > 4  # progress on stderr
+    assert main(["calibrate", url, "--method", "blignaut", "--geometry", str(geometry), "--settle", "0.35",
+                 "--collect", "0.02", "--gaze-seconds", "0", "--quiet"]) == 0
+    assert "target" not in capsys.readouterr().err
 
 
 def test_record_with_targets(geometry, tmp_path, capsys) -> None:
