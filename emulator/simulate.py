@@ -7,6 +7,7 @@ writes every feature array (see `eyehil.emulator.features`).
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from typing import TYPE_CHECKING
 
@@ -48,6 +49,8 @@ def run(args: argparse.Namespace) -> int:
         features = simulate(eyes, scene, media=media, n_pupil_points=args.points, progress=bar.update)
     elapsed = time.perf_counter() - start
     print(summary(features, about, elapsed))
+    for line in warnings(features):
+        print(f"eyehil simulate: warning: {line}", file=sys.stderr)
     if args.out:
         print(f"features written to {features.save(args.out)}")
     return 0
@@ -83,3 +86,31 @@ def summary(f: Features, about: str, seconds: float) -> str:
         f"{np.nanmax(pg[ok]) if ok.any() else np.nan:.1f} px (LED 1){glint_span}",
     ]
     return "\n".join(lines)
+
+
+def warnings(f: Features) -> list[str]:
+    """Set-ups that make the physics impossible, one line each: a side and head position with no valid fixation
+    (and why: the fixation solve, the pupil or the glints failed), or whose valid fixations all lie off the
+    camera's image (extrapolated beyond the sensor)."""
+    import numpy as np
+
+    out = []
+    for s, side in enumerate(f.sides):
+        for h, head in enumerate(f.head_positions):
+            cell = (slice(None), s, h)
+            name = getattr(head, "name", str(head))
+            t = getattr(head, "translation", None)
+            where = f"{side} eye, head position {name!r}" + (
+                "" if t is None else f" (at {', '.join(f'{v:g}' for v in np.ravel(t))} mm)")
+            n = int(np.prod(f.valid[cell].shape))
+            valid = f.valid[cell]
+            if not valid.any():
+                shape = valid.shape  # a fixation fails a stage if any of its parts (LEDs) does
+                reasons = {what: ~ok[cell].reshape(*shape, -1).all(axis=-1) for what, ok in (
+                    ("the fixation solve failed", f.fixation_valid), ("no pupil image", f.pupil_valid),
+                    ("glints invalid", f.glint_valid))}
+                why = ", ".join(f"{k} for {int(np.count_nonzero(v))}" for k, v in reasons.items() if v.any())
+                out.append(f"{where}: no valid fixation of {n} ({why or 'no reason recorded'})")
+            elif not (valid & f.in_image[cell]).any():
+                out.append(f"{where}: all {int(np.count_nonzero(valid))} valid fixations lie off the camera's image")
+    return out

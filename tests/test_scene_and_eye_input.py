@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -103,3 +105,16 @@ def test_simulate_cli_prints_a_summary_and_saves(tmp_path, capsys) -> None:
 def test_simulate_cli_reports_bad_input(capsys) -> None:
     assert main(["simulate", "--eyes", "sample:0", "--quiet"]) == 2
     assert "positive count" in capsys.readouterr().err
+
+
+def test_simulate_warns_about_a_head_position_with_no_valid_fixation(tmp_path, capsys) -> None:
+    """Issue 17: a head 2 m forward ran with exit 0 and only 'valid 0' to show for it; now a warning says where
+    and why, and the set-up that works gives no such warning."""
+    preset = (Path(__file__).resolve().parent.parent / "emulator" / "scene" / "presets" / "guestrin2006.toml")
+    far = tmp_path / "far.toml"
+    far.write_text(preset.read_text().replace("offset_mm = [0.0, 0.0, 0.0]", "offset_mm = [0.0, 0.0, 2000.0]", 1))
+    assert main(["simulate", "--scene", str(far), "--eyes", "sample:2", "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "head position 'central' (at 0, 0, 2000 mm): no valid fixation of 18 (the fixation solve failed" in err
+    assert main(["simulate", "--scene", "blignaut2014", "--eyes", "sample:2", "--quiet"]) == 0
+    assert "no valid fixation" not in capsys.readouterr().err
