@@ -152,12 +152,26 @@ def configure_for(tracker: Tracker, method: str, geometry: TrackerGeometry, eye:
     return leds
 
 
+def check_geometry(geometry: TrackerGeometry, info) -> None:
+    """Refuse a geometry file that cannot be this device's (another scene's camera or LEDs): CalibrationError
+    naming both. `info` is the device's DEVICE_INFO (None: nothing to compare)."""
+    if info is None:
+        return
+    width, height = geometry.camera.image_size
+    if (width, height) != (info.camera_width, info.camera_height) or geometry.n_leds > info.led_count:
+        raise CalibrationError(
+            f"the geometry file describes a {width} x {height} px camera with {geometry.n_leds} LED(s), but the "
+            f"device has a {info.camera_width} x {info.camera_height} px camera with {info.led_count} LED(s): "
+            f"is it the geometry of another tracker or scene?")
+
+
 def calibrate(tracker: Tracker, geometry: TrackerGeometry, method: str, plan: Plan | None = None, *,
               eye: Eye = Eye.RIGHT, model: int = 3, rate_hz: int | None = None, frames: bool = False,
               progress: Callable[[int, int], None] | None = None) -> Result:
     """Configure, stream, run `plan`'s targets, fit on the calibration ones, validate on the others; stop.
     With `frames`, the device streams images only and the host detects the features (frames-only mode).
     `progress(done, total)` is told after each target."""
+    check_geometry(geometry, tracker.info)
     plan = plan or Plan.default(geometry.screen)
     estimator = estimator_for(method, geometry, eye, model)
     n_leds = configure_for(tracker, method, geometry, eye, rate_hz, frames)

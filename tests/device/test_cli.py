@@ -56,6 +56,14 @@ def test_calibrate(geometry, capsys) -> None:
     assert "target" not in capsys.readouterr().err
 
 
+def test_calibrate_refuses_another_scenes_geometry(geometry, capsys) -> None:
+    """Issue 17: a blignaut2014 geometry file against a guestrin2006 device calibrated without a word."""
+    url = f"loop://?{query(scene='guestrin2006', rate=250)}"
+    assert main(["calibrate", url, "--method", "guestrin", "--geometry", str(geometry), "--quiet"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "1600 x 1200 px camera with 1 LED(s), but the device has a 640 x 480" in err[0]
+
+
 def test_record_with_targets(geometry, tmp_path, capsys) -> None:
     url = f"loop://?{query(scene='blignaut2014', rate=100)}"
     out_file = tmp_path / "run.jsonl"
