@@ -7,6 +7,7 @@
 - `iscan`: the ISCAN-compatible legacy mode; `pupil`: the Pupil Core Network API (ZeroMQ payloads);
 - `opengaze`: the Gazepoint Open Gaze API (XML records, docs/opengaze.md);
 - `usbip/`: USB/IP messages, URBs and the CDC-ACM device's descriptors;
+- `address`: TCP port numbers as every command checks them;
 - `enums`: the protocol's enumerations and flags;
 - `errors`: the exception tree (drawn in its docstring) and the ERROR codes.
 """

@@ -20,6 +20,8 @@ import threading
 import webbrowser
 from typing import TYPE_CHECKING
 
+from eyehil.protocols.address import port_number
+
 if TYPE_CHECKING:
     from eyehil.drivers.view.server import ViewServer
 
@@ -30,17 +32,6 @@ STREAMS = ("features", "both", "frames", "detect")
 
 class ViewListenError(OSError):
     """The page could not listen on its address; the message names the address and the reason."""
-
-
-def port_number(text: str) -> int:
-    """argparse type of the page's port: a TCP port, 0..65535 (0: any free port)."""
-    try:
-        port = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a port number") from None
-    if not 0 <= port <= 65535:
-        raise argparse.ArgumentTypeError(f"{port} is not a TCP port (0..65535, 0 = any free port)")
-    return port
 
 
 def add_view_options(p: argparse.ArgumentParser, prefix: str = "") -> None:

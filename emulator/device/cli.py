@@ -22,6 +22,7 @@ import threading
 from typing import TYPE_CHECKING
 
 from eyehil.emulator.scene.presets_index import preset_names
+from eyehil.protocols.address import port_number
 
 if TYPE_CHECKING:
     from eyehil.emulator.device.build import DeviceOptions
@@ -74,17 +75,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--view-open", action="store_true", help="--view: open the page in the system browser")
     p.add_argument("--record-video", metavar="FILE", help="--view: also write the eye images (.mp4 or .png)")
     p.set_defaults(func=run)
-
-
-def port_number(text: str) -> int:
-    """argparse type of --port and --view-port: a TCP port, 0..65535 (0: any free port)."""
-    try:
-        port = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a port number") from None
-    if not 0 <= port <= 65535:
-        raise argparse.ArgumentTypeError(f"{port} is not a TCP port (0..65535, 0 = any free port)")
-    return port
 
 
 def options(args: argparse.Namespace) -> DeviceOptions:
