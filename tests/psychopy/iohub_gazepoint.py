@@ -13,23 +13,8 @@ import json
 import sys
 import time
 
+from iohub_launch import SCREEN_PX, launch  # beside this script
 from psychopy import monitors, visual
-from psychopy.iohub import launchHubServer
-
-SCREEN_PX = (1920, 1080)  # the X server's screen (xvfb-run -s "-screen 0 1920x1080x24")
-
-
-def launch(config: dict, tries: int = 3):
-    """launchHubServer, tried again when its server process does not answer within ioHub's fixed 30 s (a busy
-    machine)."""
-    for attempt in range(tries):
-        try:
-            return launchHubServer(**dict(config))
-        except RuntimeError as exc:
-            print(f"RETRY ioHub did not start ({exc})", flush=True)
-            if attempt == tries - 1:
-                raise
-    return None
 
 
 def main() -> int:
