@@ -70,6 +70,7 @@ def test_look_at_with_absurd_times_keeps_the_subject_working(gated: GatedSolver,
         obs = subject.observe(np.array([1_000, 2_000, 3_000], np.int64))
         assert obs.values.shape[0] == 3
     finally:
+        gated.gate.set()  # the solve it started may finish: closing waits for a solve under way in this process
         subject.close()
 
 
