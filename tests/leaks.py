@@ -12,10 +12,20 @@ import os
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
 
 from eyehil.emulator.device.links.base import open_links
 
 PROC = os.path.isdir("/proc/self/fd")
+
+
+def process_running(pid: int) -> bool:
+    """True if process `pid` exists and is not a zombie (Linux /proc)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+    return state != "Z"
 
 
 def descriptors(kinds: tuple[str, ...]) -> set[str]:

@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
+from leaks import process_running
 
 from eyehil.analysis.output_folder import staged_folder
 from eyehil.analysis.study.runner import run_chunks, worker_pool
@@ -116,14 +117,6 @@ def _children(pid: int) -> list[int]:
         return []
 
 
-def _running(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except (FileNotFoundError, ProcessLookupError):
-        return False
-    return state != "Z"
-
-
 @pytest.mark.skipif(not Path(f"/proc/{os.getpid()}/task/{os.getpid()}/children").exists(), reason="needs Linux /proc")
 def test_ctrl_c_stops_eyehil_study(tmp_path: Path) -> None:
     """61 eyes: two chunks (of `CHUNK_EYES` 50), so two worker processes; SIGINT once both exist and the
@@ -160,5 +153,5 @@ def test_ctrl_c_stops_eyehil_study(tmp_path: Path) -> None:
     assert proc.returncode == 130, text
     assert "Traceback" not in text and "KeyboardInterrupt" not in text
     assert text.rstrip().splitlines()[-1].endswith("eyehil study: interrupted")
-    assert not any(_running(w) for w in workers)
+    assert not any(process_running(w) for w in workers)
     assert sorted(p.name for p in tmp_path.iterdir()) == []  # neither --out nor a partial folder

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from leaks import process_running
 from solve_helpers import FAILING_X, GENEROUS_S, HeldSolver, closed_form
 
 from eyehil.drivers.client import open_tracker
@@ -38,15 +39,6 @@ def _until(condition, what: str) -> None:
     while not condition():
         assert time.monotonic() < deadline, f"timed out waiting for {what}"
         time.sleep(0.01)
-
-
-def _running(pid: int) -> bool:
-    """True if process `pid` exists and is not a zombie."""
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except (FileNotFoundError, ProcessLookupError):
-        return False
-    return state != "Z"
 
 
 def _solve_workers(parent: int) -> list[int]:
@@ -94,7 +86,7 @@ def test_worker_solves_exactly_as_the_solver_and_gets_it_once(monkeypatch) -> No
         pid = backend.pid
     finally:
         backend.close()
-    assert backend.pid is None and not _running(pid)
+    assert backend.pid is None and not process_running(pid)
 
 
 def test_an_error_in_the_worker_comes_back_and_the_worker_goes_on(released: HeldSolver) -> None:
@@ -143,7 +135,7 @@ def test_close_abandons_a_held_solve_and_leaves_no_worker(tmp_path) -> None:
     backend.close()
     caller.join(GENEROUS_S)
     assert not caller.is_alive() and isinstance(outcome[0], SolveProcessError)
-    assert not _running(pid) and backend.pid is None
+    assert not process_running(pid) and backend.pid is None
     with pytest.raises(SolveProcessError, match="closed"):
         backend.solve(np.array([[5.0, 5.0]]))
     backend.close()  # idempotent
@@ -173,7 +165,7 @@ def test_subject_answers_from_the_grid_while_the_worker_holds_the_exact_solve(tm
         pid = backend.pid
     finally:
         subject.close()
-    assert not _running(pid)
+    assert not process_running(pid)
 
 
 WORKER_SCRIPT = """
@@ -194,10 +186,10 @@ def test_a_killed_device_leaves_no_worker(released: HeldSolver) -> None:
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:
         worker = int(proc.stdout.readline())
-        assert _running(worker)
+        assert process_running(worker)
         proc.kill()  # SIGKILL: no atexit, no close
         proc.wait(GENEROUS_S)
-        _until(lambda: not _running(worker), "the orphaned worker to exit")
+        _until(lambda: not process_running(worker), "the orphaned worker to exit")
     finally:
         proc.kill()
         proc.wait(GENEROUS_S)
@@ -219,7 +211,7 @@ def test_ctrl_c_stops_the_emulator_and_its_worker() -> None:
         assert proc.wait(GENEROUS_S) == 130
         _, err = proc.communicate(timeout=GENEROUS_S)
         assert "Traceback" not in err, err
-        _until(lambda: not any(_running(w) for w in workers), "the worker to exit")
+        _until(lambda: not any(process_running(w) for w in workers), "the worker to exit")
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
