@@ -7,13 +7,14 @@
 
 const HISTORY_S = 10;
 const TRAIL = 60, TRAIL_STEP_S = 0.05;   // 3 s of gaze
+const JITTER = 6;   // images waiting per eye for an animation frame (a jitter buffer of at most 100 ms at 60 Hz)
 const EYES = ["right", "left"];
 const view = window.eyehilView = {
   socket: "closed", connected: false, streaming: false, calibrating: null, hello: null, state: null,
   eyes: { right: {}, left: {} },     // per eye: image (ImageBitmap), header, record, window, overlay, source
   overlay: {},                       // per eye: what the last drawing put where (canvas px), for the tests
   gaze: null, target: null, trail: [], script: { name: "none", points: [] }, calibration: null,
-  history: [], stats: {}, imagesDrawn: 0, imagesReceived: 0, ticks: 0, fps: 0, ips: 0, drawnFrameIds: {},
+  history: [], stats: {}, imagesDrawn: 0, imagesReceived: 0, imagesSkipped: 0, ticks: 0, fps: 0, ips: 0, drawnFrameIds: {},
 };
 const $ = (id) => document.getElementById(id);
 let socket = null, dirty = true;
@@ -88,16 +89,31 @@ async function onImage(buffer) {
   view.imagesReceived += 1;
   const bitmap = await createImageBitmap(blob);
   const e = view.eyes[header.eye];
-  if (!e) return;
-  if (e.image) e.image.close();
-  e.image = bitmap; e.header = header; e.imageAt = performance.now();
+  if (!e) { bitmap.close(); return; }
+  // A jitter buffer: each animation frame shows the next image, so two images arriving within one frame are
+  // both shown (one a frame later) instead of the first being overwritten; at most JITTER wait.
+  e.queue = e.queue || [];
+  e.queue.push({ bitmap, header });
+  while (e.queue.length > JITTER) { e.queue.shift().bitmap.close(); view.imagesSkipped += 1; }
   dirty = true;
+}
+
+function nextImage(e) {
+  const next = e.queue && e.queue.shift();
+  if (!next) return;
+  if (e.image) e.image.close();
+  e.image = next.bitmap; e.header = next.header; e.imageAt = performance.now();
 }
 
 // --- drawing ---------------------------------------------------------------------------------
 function render() {
   if (dirty) {
     dirty = false;
+    for (const eye of EYES) {
+      const e = view.eyes[eye];
+      nextImage(e);
+      if (e.queue && e.queue.length) dirty = true;  // more waiting: the next frame shows the next one
+    }
     for (const eye of EYES) drawEye(eye);
     drawScreen(); drawChart();
   }
