@@ -1,9 +1,10 @@
 """Benchmark: the live view keeps up with the device; the frame rate the browser draws.
 
-The device runs in its own process (`eyehil emulate --link tcp --script demo`, guestrin2006: one eye, one
-320 x 240 crop per exposure); the view (`eyehil.drivers.view.server.ViewServer`) runs in this process and a real
-headless Chromium (Debian's, driven by Playwright) shows the page. Two streams, features and images both:
-250 Hz (the device renders what it can: at most one exposure's images at a time, the rest counted in its
+The device runs in its own process (`eyehil emulate --link tcp --script demo --render-workers N`, guestrin2006:
+one eye, one 320 x 240 crop per exposure, rendered ahead in `VIEW_RENDER_WORKERS` processes, default 1); the
+view (`eyehil.drivers.view.server.ViewServer`) runs in this process and a real headless Chromium (Debian's,
+driven by Playwright) shows the page. Two streams, features and images both: 250 Hz (the device renders what
+it can, the rest counted in its
 `frames_dropped` by design) and 60 Hz (an image for every exposure). Over `SECONDS` of wall time: samples per
 second received, images per second the page received and drew (its own count, window.eyehilView), and the loss
 counters that must stay at zero: the device's `samples_dropped`, the host's lost frames, overflowed samples and
@@ -16,6 +17,7 @@ fewer images than its rate, and fewer still when the view and the browser take t
 
 from __future__ import annotations
 
+import os
 import time
 
 from bench.device import emulator
@@ -30,6 +32,8 @@ RATES = (250, 60)
 SECONDS = 5.0
 TARGET_FPS = 55.0
 KEEP_UP = 0.9  # the page draws at least this share of the images the view receives
+#: the device renders its images in this many processes ahead of the link (`--render-workers`; 0: on its thread)
+RENDER_WORKERS = int(os.environ.get("VIEW_RENDER_WORKERS", "1"))
 LOSS = ("samples_dropped", "lost_frames", "samples_overflowed", "images_incomplete", "view_dropped")
 
 
@@ -58,7 +62,7 @@ def _counters(view: ViewServer) -> dict:
 
 def once(browser, rate_hz: int, seconds: float = SECONDS) -> dict:
     """One run at `rate_hz`; rates per wall second and the loss counters' increase."""
-    with emulator("--link", "tcp", "--rate", str(rate_hz)) as url:
+    with emulator("--link", "tcp", "--rate", str(rate_hz), "--render-workers", str(RENDER_WORKERS)) as url:
         bare = bare_host(url, seconds)
         result = _with_page(browser, url, seconds)
     return {"rate_hz": rate_hz, "bare_images_per_s": bare, **result}
