@@ -13,6 +13,7 @@ from pupil_labs.pupil_core_network_client import Device
 from zmq_helpers import eventually, start_server
 
 from eyehil.emulator.device.build import DeviceOptions, build_subject
+from eyehil.emulator.device.links.listen import ListenError
 from eyehil.emulator.device.pupil.server import PupilServer, ServerOptions
 from eyehil.protocols.pupil import MAX_PAYLOAD_BYTES
 
@@ -116,7 +117,7 @@ def test_two_clients_interleaved(server) -> None:
 
 def test_a_failed_start_leaves_nothing_behind(server) -> None:
     srv = server()
-    with pytest.raises(zmq.ZMQError):
+    with pytest.raises(ListenError, match=f"cannot listen on zmq 127.0.0.1:{srv.port}: address already in use"):
         start_server(port=srv.port)  # the port is taken
     with pytest.raises(TypeError, match="AppearanceSolver"):
         PupilServer(build_subject(DeviceOptions(), appearance=False), options=ServerOptions(port=0)).start()
