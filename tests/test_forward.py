@@ -6,11 +6,12 @@ import dataclasses
 
 import numpy as np
 import pytest
+from mirror import mirror_scene
 
 from eyehil.emulator.eye.published import published_eyes
 from eyehil.emulator.forward import Poses, simulate
 from eyehil.emulator.optics.camera import PinholeCamera
-from eyehil.emulator.scene import Scene, Screen, load_scene
+from eyehil.emulator.scene import Screen, load_scene
 
 
 @pytest.fixture(scope="module")
@@ -67,18 +68,6 @@ def test_explicit_poses_primary_position_and_listing(eyes) -> None:
     assert np.all(free.torsion_deg == 0.0)
 
 
-def _mirror_scene(scene: Scene) -> Scene:
-    cam = scene.camera
-    pose = cam.pose_deg
-    mirrored_cam = PinholeCamera.from_angles(
-        position=cam.position * [-1, 1, 1], pitch_deg=pose["pitch_deg"], yaw_deg=-pose["yaw_deg"],
-        roll_deg=-pose["roll_deg"], focal_px=cam.focal_px, principal_px=cam.principal_px,
-        resolution_px=cam.resolution_px)
-    heads = tuple(dataclasses.replace(h, x=-h.x, yaw=-h.yaw, roll=-h.roll) for h in scene.head_positions)
-    return dataclasses.replace(scene, camera=mirrored_cam, leds=scene.leds * [-1, 1, 1], head_positions=heads,
-                               sides=tuple({"right": "left", "left": "right"}[s] for s in scene.sides))
-
-
 def test_left_right_mirror_symmetry(eyes) -> None:
     base = load_scene("guestrin2006")
     scene = dataclasses.replace(base, camera=PinholeCamera.from_angles(
@@ -87,7 +76,7 @@ def test_left_right_mirror_symmetry(eyes) -> None:
         leds=np.array([[150.0, 20.0, 640.0], [-220.0, 0.0, 660.0]]))
     targets = scene.targets() + np.array([30.0, 10.0, 0.0])
     right = simulate(eyes, scene, targets=targets)
-    left = simulate(eyes, _mirror_scene(scene), targets=targets * [-1, 1, 1])
+    left = simulate(eyes, mirror_scene(scene), targets=targets * [-1, 1, 1])
     cx = scene.camera.principal_px[0]
     np.testing.assert_allclose(2 * cx - left.pupil_centre_px[..., 0], right.pupil_centre_px[..., 0], atol=1e-6)
     np.testing.assert_allclose(left.pupil_centre_px[..., 1], right.pupil_centre_px[..., 1], atol=1e-6)

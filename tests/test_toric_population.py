@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from mirror import mirror_scene
 
 from eyehil.emulator.eye.anatomy import full_anatomy, gka_stop
 from eyehil.emulator.eye.astigmatism import ANTERIOR_DN, POSTERIOR_DN, power_vector, principal_radii
@@ -123,18 +124,6 @@ def test_astigmatic_decentred_tilted_eyes_converge(preset: str) -> None:
     assert np.max(f.fixation_residual_mm) <= 0.01
 
 
-def _mirror_scene(scene: Scene) -> Scene:
-    cam = scene.camera
-    pose = cam.pose_deg
-    mirrored_cam = PinholeCamera.from_angles(
-        position=cam.position * [-1, 1, 1], pitch_deg=pose["pitch_deg"], yaw_deg=-pose["yaw_deg"],
-        roll_deg=-pose["roll_deg"], focal_px=cam.focal_px, principal_px=cam.principal_px,
-        resolution_px=cam.resolution_px)
-    heads = tuple(dataclasses.replace(h, x=-h.x, yaw=-h.yaw, roll=-h.roll) for h in scene.head_positions)
-    return dataclasses.replace(scene, camera=mirrored_cam, leds=scene.leds * [-1, 1, 1], head_positions=heads,
-                               sides=tuple({"right": "left", "left": "right"}[s] for s in scene.sides))
-
-
 def test_left_right_mirror_symmetry_of_astigmatic_eyes() -> None:
     eyes = full_anatomy(sample(4, np.random.default_rng(9)).eyes, np.random.default_rng(10))
     assert not eyes.rotationally_symmetric.any() and np.all(np.abs(eyes.anterior_axis_deg % 90) > 1)
@@ -145,7 +134,7 @@ def test_left_right_mirror_symmetry_of_astigmatic_eyes() -> None:
         leds=np.array([[150.0, 20.0, 640.0], [-220.0, 0.0, 660.0]]))
     targets = scene.targets() + np.array([30.0, 10.0, 0.0])
     right = simulate(eyes, scene, targets=targets)
-    left = simulate(eyes, _mirror_scene(scene), targets=targets * [-1, 1, 1])
+    left = simulate(eyes, mirror_scene(scene), targets=targets * [-1, 1, 1])
     assert right.valid.all() and left.valid.all()
     cx = scene.camera.principal_px[0]
     np.testing.assert_allclose(2 * cx - left.pupil_centre_px[..., 0], right.pupil_centre_px[..., 0], atol=1e-6)

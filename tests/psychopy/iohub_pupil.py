@@ -11,13 +11,24 @@ sample event with its gaze in screen fractions (top-left origin; converted back 
 coordinates; ``time`` is the event's device_time, the gaze datum's Pupil time in s), then ``DONE``.
 """
 
-import json
 import sys
-import time
 
-from iohub_launch import SCREEN_PX, launch  # beside this script
-from psychopy import monitors, visual
+from iohub_launch import session  # beside this script
 from psychopy.iohub.constants import EyeTrackerConstants
+
+
+def calibrate(tracker) -> None:
+    print(f"CALIBRATION {tracker.runSetupProcedure()}", flush=True)
+    print(f"OK {EyeTrackerConstants.EYETRACKER_OK}", flush=True)
+
+
+def sample(e, to_fraction) -> dict | None:
+    """A monocular or binocular Pupil sample event: its gaze as screen fractions."""
+    kind = type(e).__name__
+    if "SampleEvent" not in kind:
+        return None
+    x, y = (e.left_gaze_x, e.left_gaze_y) if kind.startswith("Binocular") else (e.gaze_x, e.gaze_y)
+    return {"time": e.device_time, "kind": kind, "gaze": to_fraction(x, y)}
 
 
 def main() -> int:
@@ -28,35 +39,7 @@ def main() -> int:
             "pupil_remote": {"ip_address": "127.0.0.1", "port": port, "timeout_ms": 1000},
             "pupil_capture_recording": {"enabled": False, "location": None},
             "pupillometry_only": False, "confidence_threshold": 0.6, "surface_name": surface}}}
-    monitor = monitors.Monitor("eyehil", width=37.7, distance=65.0)  # cm, the guestrin2006 scene's screen
-    monitor.setSizePix(list(SCREEN_PX))
-    window = visual.Window(SCREEN_PX, fullscr=True, units="pix", monitor=monitor, allowGUI=False)
-    config["window"] = window
-    io = launch(config)
-    try:
-        tracker = io.devices.tracker
-        print(f"CALIBRATION {tracker.runSetupProcedure()}", flush=True)
-        print(f"OK {EyeTrackerConstants.EYETRACKER_OK}", flush=True)
-        left, top, right, bottom = io.devices.display.getCoordBounds()
-        print("READY", flush=True)
-        sys.stdin.readline()
-        tracker.setRecordingState(True)
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            for e in tracker.getEvents():
-                kind = type(e).__name__
-                if "SampleEvent" not in kind:
-                    continue
-                x, y = (e.left_gaze_x, e.left_gaze_y) if kind.startswith("Binocular") else (e.gaze_x, e.gaze_y)
-                frac = [(x - left) / (right - left), 1.0 - (y - bottom) / (top - bottom)]
-                print("SAMPLE " + json.dumps({"time": e.device_time, "kind": kind, "gaze": frac}), flush=True)
-            time.sleep(0.01)
-        tracker.setRecordingState(False)
-    finally:
-        io.quit()
-        window.close()
-    print("DONE", flush=True)
-    return 0
+    return session(config, calibrate, sample, seconds)
 
 
 if __name__ == "__main__":

@@ -3,9 +3,12 @@ under Xvfb, reading its stdout line by line with a deadline."""
 
 from __future__ import annotations
 
+import contextlib
+import json
 import os
 import queue
 import shutil
+import signal
 import subprocess
 import threading
 import time
@@ -38,7 +41,7 @@ class Script:
     def __init__(self, name: str, *args: object) -> None:
         cmd = ["xvfb-run", "-a", "-s", SCREEN, psychopy_python(), str(HERE / name), *map(str, args)]
         self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                     text=True, cwd=HERE)
+                                     text=True, cwd=HERE, start_new_session=True)  # its group: xvfb-run, X, python
         self.lines: list[str] = []
         self._queue: queue.Queue[str | None] = queue.Queue()
         self._reader = threading.Thread(target=self._read, daemon=True)
@@ -63,6 +66,11 @@ class Script:
             if line.startswith(prefix):
                 return line[len(prefix):].strip()
 
+    def samples(self, after_s: float) -> list[dict]:
+        """The ``SAMPLE <json>`` records read so far whose ``time`` is later than `after_s`."""
+        records = (json.loads(line[len("SAMPLE"):]) for line in self.lines if line.startswith("SAMPLE"))
+        return [r for r in records if r["time"] > after_s]
+
     def send(self, text: str) -> None:
         self.proc.stdin.write(text + "\n")
         self.proc.stdin.flush()
@@ -71,11 +79,13 @@ class Script:
         return "\n".join(self.lines[-n:])
 
     def close(self) -> None:
-        """Wait for the end (or kill it at the deadline), then join the reader."""
+        """Wait for the end (or, at the deadline, kill its whole process group: the script under xvfb-run holds
+        the pipe the reader reads), then join the reader."""
         try:
             self.proc.wait(timeout=max(1.0, self.end - time.monotonic()))
         except subprocess.TimeoutExpired:
-            self.proc.kill()
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(self.proc.pid, signal.SIGKILL)
             self.proc.wait()
         self._reader.join(timeout=10)
         self.proc.stdin.close()

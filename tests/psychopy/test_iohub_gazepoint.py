@@ -37,8 +37,7 @@ def test_iohub_calibrates_and_records_binocular_gaze() -> None:
         if script is not None:
             script.close()
         srv.close()
-    samples = [json.loads(line[len("SAMPLE"):]) for line in script.lines if line.startswith("SAMPLE")]
-    settled = [s for s in samples if s["time"] > shown_s + SETTLE_S]
+    settled = script.samples(after_s=shown_s + SETTLE_S)
     assert len(settled) >= 30, script.tail()
     for s in settled:
         assert s["status"] == 0  # both eyes valid

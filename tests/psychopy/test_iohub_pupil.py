@@ -4,8 +4,6 @@ built from `gaze.3d.` and `surfaces.<name>` lie within 1 deg of the target the s
 
 from __future__ import annotations
 
-import json
-
 import msgpack
 import zmq
 from opengaze_helpers import angle_deg
@@ -58,8 +56,7 @@ def test_iohub_calibrates_and_reads_gaze_on_the_surface() -> None:
         if script is not None:
             script.close()
         srv.close()
-    samples = [json.loads(line[len("SAMPLE"):]) for line in script.lines if line.startswith("SAMPLE")]
-    settled = [s for s in samples if s["time"] > onset + SETTLE_S]
+    settled = script.samples(after_s=onset + SETTLE_S)
     assert len(settled) >= 30, script.tail()
     for s in settled:
         assert angle_deg(scene, TARGET, tuple(s["gaze"])) < 1.0, s
