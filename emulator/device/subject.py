@@ -91,7 +91,7 @@ class BlinkProcess:
 
     MAX_PENDING = 64  # requested closures held at once (a page hammering its blink button cannot grow the list)
 
-    def close(self, start_us: int, duration_s: float) -> bool:
+    def add(self, start_us: int, duration_s: float) -> bool:
         """Close the eyes from `start_us` (device clock, us) for `duration_s` s (0 < duration <= 5 s), besides the
         spontaneous blinks; False (nothing added) if `MAX_PENDING` closures are already pending."""
         if not 0.0 < duration_s <= 5.0:
@@ -137,8 +137,8 @@ class Subject:
                 solver.field  # noqa: B018 - never waiting later: the grid must be there before the first stimulus
 
     def blink(self, start_us: int, duration_s: float) -> bool:
-        """Close the eyes at `start_us` (device clock, us) for `duration_s` s; see `BlinkProcess.close`."""
-        return self.blinks.close(start_us, duration_s)
+        """Close the eyes at `start_us` (device clock, us) for `duration_s` s; see `BlinkProcess.add`."""
+        return self.blinks.add(start_us, duration_s)
 
     @property
     def screen_centre(self) -> np.ndarray:
