@@ -9,7 +9,7 @@ import msgpack
 import numpy as np
 import pytest
 import zmq
-from zmq_helpers import eventually, topic_is, wait_for
+from zmq_helpers import eventually, subscribed, topic_is, wait_for
 
 from eyehil.emulator.device.gaze import Fixation, Pursuit, Saccade, Timeline, plan
 from eyehil.emulator.device.pupil.world import (
@@ -105,7 +105,8 @@ def test_the_target_is_the_latest_shown_else_the_scripts() -> None:
 def test_real_client_receives_world_frames_that_show_the_stimulus(server, device_of, subscribe, fmt: str) -> None:
     srv = server(scene="guestrin2006", world_rate_hz=30, frame_rate_hz=0)
     device = device_of(srv)
-    sub = subscribe(device, ["frame.world", "notify.frame_publishing"])
+    sub = subscribe(device, ["frame.world", "notify.frame_publishing", "notify.test.hello"])
+    subscribed(device, sub)  # before the plugin starts: its notification must not go out before we listen
     assert device.request_plugin_start("Frame_Publisher", {"format": fmt}) == "Message forwarded."
     assert wait_for(sub, topic_is("notify.frame_publishing.started")).payload["format"] == fmt
     onset = device.request_current_pupil_time() + 0.3
@@ -135,7 +136,8 @@ def test_real_client_receives_world_frames_that_show_the_stimulus(server, device
 def test_stop_plugin_stops_world_frames(server, device_of, subscribe) -> None:
     srv = server(world_rate_hz=50, frame_rate_hz=0)
     device = device_of(srv)
-    sub = subscribe(device, ["frame.world", "notify.frame_publishing"])
+    sub = subscribe(device, ["frame.world", "notify.frame_publishing", "notify.test.hello"])
+    subscribed(device, sub)  # before the plugin starts: its notification must not go out before we listen
     wait_for(sub, topic_is("frame.world"))
     device.send_notification({"subject": "stop_plugin", "name": "Frame_Publisher"})
     wait_for(sub, topic_is("notify.frame_publishing.stopped"))
