@@ -17,6 +17,7 @@ import signal
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
+from multiprocessing.connection import wait
 from typing import Any
 
 #: s to wait for each terminated worker to exit
@@ -85,16 +86,29 @@ def _ignore_sigint() -> None:
 
 
 def stop_pool(pool: ProcessPoolExecutor) -> None:
-    """Cancel what is queued and terminate the workers now, instead of waiting for the running chunks."""
+    """Cancel what is queued and terminate the workers now, instead of waiting for the running chunks.
+
+    A worker's end is read from its sentinel, not from `join`: the pool's own manager thread reaps the workers
+    too, and the thread that loses that `waitpid` race sees the worker as still running (ECHILD) until the winner
+    records the exit code. Joining the manager thread last leaves every worker's exit code recorded."""
     processes = list((getattr(pool, "_processes", None) or {}).values())  # before shutdown forgets them
+    manager = getattr(pool, "_executor_manager_thread", None)
     pool.shutdown(wait=False, cancel_futures=True)
     for process in processes:
         process.terminate()
     for process in processes:
-        process.join(JOIN_TIMEOUT_S)
-        if process.is_alive():  # did not take SIGTERM in time: no worker outlives the pool
+        if not _ended(process):  # did not take SIGTERM in time: no worker outlives the pool
             process.kill()
-            process.join(JOIN_TIMEOUT_S)
+            _ended(process)
+    if manager is not None:
+        manager.join(JOIN_TIMEOUT_S)
+    for process in processes:
+        process.join(0)
+
+
+def _ended(process: Any) -> bool:
+    """True once the worker has exited (its sentinel is ready), waiting up to JOIN_TIMEOUT_S."""
+    return bool(wait([process.sentinel], JOIN_TIMEOUT_S))
 
 
 def _run_dask(func, chunks, sizes, address: str, tell, kwargs) -> list[Any]:
