@@ -31,6 +31,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(prog="python -m bench", description=__doc__)
     parser.add_argument("names", nargs="*", help=f"benchmarks to run (default all: {', '.join(BENCHMARKS)})")
     parser.add_argument("--quick", action="store_true", help="one repeat instead of three")
+    parser.add_argument("--eyes", type=int, default=None,
+                        help="study only: the study on this many Rozema eyes, local and on Dask (bench/study_scale.py)")
     args = parser.parse_args()
     unknown = set(args.names) - set(BENCHMARKS) - set(ON_REQUEST)
     if unknown:
@@ -38,7 +40,13 @@ def main() -> int:
     repeats = 1 if args.quick else 3
     print(f"# {platform.python_implementation()} {platform.python_version()}, {os.cpu_count()} CPUs, "
           f"{platform.machine()}; best of {repeats}")
+    if args.eyes is not None and (args.eyes < 1 or set(args.names) != {"study"}):
+        parser.error("--eyes goes with the study benchmark alone: python -m bench study --eyes 10000")
     for name in args.names or BENCHMARKS:
+        if args.eyes is not None:
+            module = importlib.import_module("bench.study_scale")
+            print(module.report(module.run(repeats, eyes=args.eyes)), flush=True)
+            continue
         module = importlib.import_module(f"bench.{name}")
         print(module.report(module.run(repeats)), flush=True)
     return 0

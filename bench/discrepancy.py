@@ -10,8 +10,8 @@ import time
 
 from eyehil.analysis.discrepancy.data import guestrin2006_real
 from eyehil.analysis.discrepancy.workflow import run_discrepancy
-from eyehil.analysis.study.runner import default_workers
 from eyehil.emulator.eye.published import published_eyes
+from eyehil.parallel import default_workers
 
 TARGET_SECONDS = 60.0
 SEARCH_EYES = 20

@@ -16,9 +16,9 @@ from pathlib import Path
 
 from eyehil.analysis.study.replication import run_study
 from eyehil.analysis.study.report import write_outputs
-from eyehil.analysis.study.runner import default_workers
 from eyehil.analysis.study.summary import summarise_study
 from eyehil.emulator.eye.published import published_eyes
+from eyehil.parallel import default_workers
 
 TARGET_SECONDS = 10.0
 

@@ -3,7 +3,8 @@
 - `eye/`: anatomy (EyeModel, the Rozema 2011 population, published and normative eyes, media);
 - `optics/`: conics, refraction/reflection, glint and apparent-pupil solvers, camera, ellipse fit;
 - `scene/`: camera, LEDs, screen, targets, head positions, presets; `fixation`: Listing's-law fixations;
-- `forward`: (eyes, scene, targets) -> `features.Features`, batched; `simulate`: `eyehil simulate`;
+- `forward`: (eyes, scene, targets) -> `features.Features`, batched; `feature_file`: features on disk, written
+  chunk by chunk; `simulate`: `eyehil simulate` (chunks on a process pool or Dask, streamed to a file);
 - `effects/`: named model extensions (the discrepancy workflow's vocabulary); `render/`: synthetic frames;
 - `device/`: the virtual tracker and its links and facades; `data/`: the figures the physics needs.
 

@@ -7,6 +7,8 @@ The package (each subpackage's docstring names its modules; README.md has the co
 - `eyehil.protocols`: pure codecs of the links (native protocol, ISCAN, Pupil, USB/IP);
 - `eyehil.drivers`: the host (open a tracker by URL, detect features in frames, calibrate gaze);
 - `eyehil.analysis`: the replication study and the discrepancy workflow;
+- `parallel`: chunks of eyes on a local process pool or a Dask cluster (simulate, the study, the discrepancy
+  workflow);
 - `cli`: the `eyehil` command (a thin dispatcher; `__main__`: ``python -m eyehil``); `emulate_view`: the
   live view beside the device for `eyehil emulate --view` (the one place the two meet outside analysis).
 

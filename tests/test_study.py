@@ -11,10 +11,10 @@ import pytest
 from eyehil.analysis.study.findings import all_findings
 from eyehil.analysis.study.replication import run_study
 from eyehil.analysis.study.report import write_outputs
-from eyehil.analysis.study.runner import run_chunks
 from eyehil.analysis.study.summary import summarise_study
 from eyehil.emulator.eye.population import sample
 from eyehil.emulator.eye.published import published_eyes
+from eyehil.parallel import run_chunks
 
 
 @pytest.fixture(scope="module")

@@ -19,7 +19,7 @@ import pytest
 from leaks import process_running
 
 from eyehil.analysis.output_folder import staged_folder
-from eyehil.analysis.study.runner import run_chunks, worker_pool
+from eyehil.parallel import run_chunks, worker_pool
 
 GENEROUS_S = 120.0
 

@@ -90,9 +90,9 @@ def run(args: argparse.Namespace) -> int:
     from eyehil.analysis.discrepancy.report import write_outputs
     from eyehil.analysis.discrepancy.workflow import run_discrepancy
     from eyehil.analysis.output_folder import check_output_folder, staged_folder
-    from eyehil.analysis.study.runner import default_workers
     from eyehil.emulator import effects as registry
     from eyehil.emulator.eye.select import eyes_from_spec
+    from eyehil.parallel import default_workers
 
     _check(args)
     out = check_output_folder(Path(args.out))

@@ -47,10 +47,10 @@ from eyehil.analysis.discrepancy.data import Measured, MeasuredCondition
 from eyehil.analysis.discrepancy.metrics import Evaluator
 from eyehil.analysis.discrepancy.search import TOP, EffectFit, max_evaluations, search_effects
 from eyehil.analysis.discrepancy.stats import Comparison, compare, permutation_gof
-from eyehil.analysis.study.runner import worker_pool
 from eyehil.emulator import effects as registry
 from eyehil.emulator.effects import Applied, Effect
 from eyehil.emulator.eye.model import EyeModel
+from eyehil.parallel import worker_pool
 
 ALPHA_GOF = 0.01
 LATER_CANDIDATES = 8

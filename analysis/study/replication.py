@@ -3,7 +3,7 @@
 `run_study(eyes)` ray-traces every eye through both experiments (Guestrin 2006: 9 targets x 5 head
 positions, one eye, two LEDs; Blignaut 2014: 135 targets, both eyes, one LED), calibrates the host
 estimators and gathers per-eye errors; `eyehil.analysis.study.summary` computes the published statistics. Eyes are
-processed in parallel chunks of `CHUNK_EYES` (`eyehil.analysis.study.runner`), each chunk's calibrations batched
+processed in parallel chunks of `CHUNK_EYES` (`eyehil.parallel`), each chunk's calibrations batched
 across its eyes (`eyehil.drivers.gaze.guestrin_batch`, `eyehil.drivers.gaze.blignaut.fit_form_many`).
 
 Guestrin estimator: `profile` (default "study-code", the estimator of the study's public code, which
@@ -24,11 +24,11 @@ import numpy as np
 
 from eyehil.analysis.study import experiments
 from eyehil.analysis.study.published import CONFIGURATIONS
-from eyehil.analysis.study.runner import run_chunks
 from eyehil.drivers.gaze.guestrin import PROFILES
 from eyehil.emulator.eye.model import EyeModel
 from eyehil.emulator.forward import simulate
 from eyehil.emulator.scene import HeadPose, Scene, load_scene
+from eyehil.parallel import run_chunks
 
 CHUNK_EYES = 50
 

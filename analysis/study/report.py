@@ -16,12 +16,12 @@ from eyehil.analysis.study.breakdown import COMPONENTS, GROUPS, NEGLIGIBLE_DEG
 from eyehil.analysis.study.findings import all_findings
 from eyehil.analysis.study.published import CONFIGURATIONS, blignaut_real, fischer_simulated, guestrin_real_deg
 from eyehil.analysis.study.replication import StudyResult
-from eyehil.analysis.study.runner import default_workers, worker_pool
 from eyehil.analysis.study.summary import best_function_errors, error_columns
 from eyehil.emulator.eye.model import EyeModel
 from eyehil.emulator.eye.population import study_parameters
 from eyehil.emulator.forward import simulate
 from eyehil.emulator.scene import load_scene
+from eyehil.parallel import default_workers, worker_pool
 
 
 def write_outputs(result: StudyResult, summary: dict[str, Any], out: Path,

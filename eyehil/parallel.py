@@ -1,7 +1,10 @@
-"""Run per-eye work in parallel: a local process pool by default, a Dask cluster when given an address.
+"""Run per-eye work in parallel: a local process pool by default, a Dask cluster when given an address. Used by
+`eyehil simulate`, the study and the discrepancy workflow.
 
 Work is split into chunks of eyes; `run_chunks(func, chunks, ...)` returns the results in chunk order
-and tells `progress(n_eyes)` as chunks finish. `func` must be a module-level function (picklable).
+and tells `progress(n_eyes)` as chunks finish; `iter_chunks` yields `(index, result)` as each chunk finishes,
+so that a caller can write a chunk away before the next arrives (memory bounded by the chunks in flight).
+`func` must be a module-level function (picklable).
 
 Ctrl-C (or any error) stops the work at once: the queued chunks are cancelled and the worker processes
 terminated, rather than waited for; the workers ignore SIGINT themselves (a terminal's Ctrl-C reaches the whole
@@ -39,18 +42,37 @@ def run_chunks(
     progress: Callable[[int], None] | None = None,
     **kwargs: Any,
 ) -> list[Any]:
-    """func(chunk, **kwargs) for every chunk; serial when workers == 1, Dask when `scheduler` is set."""
+    """func(chunk, **kwargs) for every chunk, in chunk order; serial when workers == 1, Dask when `scheduler` is
+    set."""
+    results: list[Any] = [None] * len(chunks)
+    for i, result in iter_chunks(func, chunks, sizes=sizes, workers=workers, scheduler=scheduler,
+                                 progress=progress, **kwargs):
+        results[i] = result
+    return results
+
+
+def iter_chunks(
+    func: Callable[..., Any],
+    chunks: Sequence[Any],
+    *,
+    sizes: Sequence[int],
+    workers: int | None = None,
+    scheduler: str | None = None,
+    progress: Callable[[int], None] | None = None,
+    **kwargs: Any,
+) -> Iterator[tuple[int, Any]]:
+    """(chunk index, func(chunk, **kwargs)) as each chunk finishes (in order when serial); `progress(size)` is told
+    after the caller has taken each result. Leaving the loop early (an error, Ctrl-C) stops the work at once."""
     tell = progress or (lambda n: None)
     if scheduler:
-        return _run_dask(func, chunks, sizes, scheduler, tell, kwargs)
+        yield from _iter_dask(func, chunks, sizes, scheduler, tell, kwargs)
+        return
     workers = workers or default_workers()
     if workers <= 1 or len(chunks) <= 1:
-        out = []
-        for chunk, size in zip(chunks, sizes, strict=True):
-            out.append(func(chunk, **kwargs))
+        for i, (chunk, size) in enumerate(zip(chunks, sizes, strict=True)):
+            yield i, func(chunk, **kwargs)
             tell(size)
-        return out
-    results: list[Any] = [None] * len(chunks)
+        return
     with worker_pool(workers) as pool:
         blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         try:
@@ -58,10 +80,9 @@ def run_chunks(
         finally:
             signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
         for future in as_completed(futures):
-            i = futures[future]
-            results[i] = future.result()
+            i = futures.pop(future)
+            yield i, future.result()
             tell(sizes[i])
-    return results
 
 
 @contextmanager
@@ -111,22 +132,22 @@ def _ended(process: Any) -> bool:
     return bool(wait([process.sentinel], JOIN_TIMEOUT_S))
 
 
-def _run_dask(func, chunks, sizes, address: str, tell, kwargs) -> list[Any]:
+def _iter_dask(func, chunks, sizes, address: str, tell, kwargs) -> Iterator[tuple[int, Any]]:
     try:
         from distributed import Client
         from distributed import as_completed as dask_completed
     except ImportError as exc:  # the optional extra
         raise RuntimeError("--scheduler needs the optional extra: pip install 'eyehil[dask]'") from exc
     with Client(address) as client:
-        futures = [client.submit(func, chunk, pure=False, **kwargs) for chunk in chunks]
-        index = {f.key: i for i, f in enumerate(futures)}
-        results: list[Any] = [None] * len(chunks)
+        held: list[Any] = [client.submit(func, chunk, pure=False, **kwargs) for chunk in chunks]
+        index = {f.key: i for i, f in enumerate(held)}
         try:
-            for future in dask_completed(futures):
+            for future in dask_completed(held):
                 i = index[future.key]
-                results[i] = future.result()
+                result = future.result()
+                held[i] = future = None  # the cluster forgets a result once the caller has it
+                yield i, result
                 tell(sizes[i])
-        except BaseException:  # Ctrl-C: the cluster stops this work too
-            client.cancel(futures)
+        except BaseException:  # Ctrl-C, an error, or the caller leaving early: the cluster stops this work too
+            client.cancel([f for f in held if f is not None])
             raise
-    return results
