@@ -31,7 +31,14 @@ from eyehil.analysis.discrepancy.measured import load_recordings
 from eyehil.analysis.discrepancy.metrics import Evaluator
 from eyehil.analysis.discrepancy.recording import write_recording
 from eyehil.analysis.discrepancy.search import max_evaluations, search_effects
-from eyehil.analysis.discrepancy.stats import compare, holm, normal_score, permutation_gof, permutation_p
+from eyehil.analysis.discrepancy.stats import (
+    compare,
+    gap_measure,
+    holm,
+    normal_score,
+    permutation_gof,
+    permutation_p,
+)
 from eyehil.analysis.discrepancy.workflow import find, hidden_measured, run_discrepancy
 from eyehil.analysis.study import experiments
 from eyehil.cli import main
@@ -87,6 +94,25 @@ def test_effects_act_where_they_say(scene) -> None:
     assert 0.1 < np.std(noisy.pupil_centre_px - plain.pupil_centre_px) < 0.3
     with pytest.raises(ValueError, match="Generator"):
         simulate_with(eyes, scene, [effects.parse("feature_noise=0.2")])
+
+
+def test_glint_occlusion_pulls_the_pupil_away_from_the_glint_whatever_the_traced_points(scene) -> None:
+    """The occlusion reads the pupil's edge from its fitted ellipse, so the shift does not depend on how many
+    boundary points were ray-traced (the discrepancy search traces fewer than a default run)."""
+    eyes = published_eyes()[:10]
+    occluded = effects.parse("glint_occlusion=1")
+    shifts = []
+    for points in (12, 30):
+        plain = simulate(eyes, scene, n_pupil_points=points)
+        moved = simulate_with(eyes, scene, [occluded], n_pupil_points=points)
+        shifts.append(moved.pupil_centre_px - plain.pupil_centre_px)
+    hit = np.linalg.norm(shifts[1], axis=-1) > 1e-6
+    assert 0 < hit.sum() < hit.size  # only where a glint is on the edge
+    np.testing.assert_allclose(shifts[0], shifts[1], atol=1e-4)
+    away = plain.pupil_centre_px[..., None, :] - plain.glint_px  # (..., L, 2): from each glint to the pupil centre
+    on_edge = np.argmin(np.abs(np.linalg.norm(away, axis=-1) - plain.pupil_axes_px[..., :1] / 2), axis=-1)
+    nearest = np.take_along_axis(away, on_edge[..., None, None], axis=-2)[..., 0, :]  # the glint nearest the edge
+    assert np.all(np.sum(shifts[1][hit] * nearest[hit], axis=-1) > 0)
 
 
 def test_effect_specs_parse_and_refuse() -> None:
@@ -205,6 +231,24 @@ def test_normal_scores_and_the_spread_term() -> None:
     assert 0 < normal_score(5.0, 3) < 5.0 and normal_score(-5.0, 3) == -normal_score(5.0, 3)
     assert normal_score(1e6, 3) > 0
     np.testing.assert_allclose(holm(np.array([0.01, np.nan, 0.04])), [0.02, np.nan, 0.04])
+
+
+@pytest.mark.parametrize("paired", [True, False])
+def test_gap_measure_of_many_simulations_equals_compare_of_each(paired) -> None:
+    """The search scores its surrogate grids with `gap_measure` (vectorised): it must be `compare`'s D, for
+    per-subject conditions (paired contrasts or not), a summary with an SD, a summary without one (the one-sample
+    branch), skewed values, a NaN eye and a row whose spread is below the floor."""
+    rng = np.random.default_rng(4)
+    conditions = {"H1": MeasuredCondition(rng.gamma(2.0, 0.2, 4)), "H2": MeasuredCondition(rng.gamma(2.0, 0.25, 4)),
+                  "head:x": MeasuredCondition(None, 0.4, 0.1, 6), "C5": MeasuredCondition(None, 1.3, None, 26)}
+    measured = Measured("guestrin2006", conditions, ("a", "b", "c", "d") if paired else None)
+    reference = {"H2": "H1", "head:x": "H1"}.get
+    sims = {k: rng.lognormal(-1.0, 0.5, (30, 12)) for k in conditions}
+    sims["H1"][3, 5] = np.nan
+    sims["H2"][7] = 0.3  # no spread at all: the SD floor
+    D = gap_measure(sims, measured, reference)
+    expected = [compare({k: v[j] for k, v in sims.items()}, measured, reference, tests=False).D for j in range(30)]
+    np.testing.assert_allclose(D, expected, rtol=1e-12, atol=1e-12)
 
 
 def test_holm_adjustment_known_answer() -> None:

@@ -54,6 +54,8 @@ TOP = 3
 EDGE = 0.01
 
 Metrics = dict[str, np.ndarray]
+#: D of many simulations at once: conditions shaped (P, E) -> (P,)
+ScoreMany = Callable[[Metrics], np.ndarray]
 
 
 @dataclass(frozen=True, eq=False)
@@ -165,13 +167,13 @@ class EffectSearch:
         return self._pending
 
     def tell(self, Ds: np.ndarray, metrics: Sequence[Metrics] | None = None,
-             score: Callable[[Metrics], float] | None = None) -> None:
+             score: Callable[[Metrics], float] | None = None, score_many: ScoreMany | None = None) -> None:
         self.points = np.vstack([self.points, self._pending])
         self.Ds = np.concatenate([self.Ds, np.asarray(Ds, float)])
         self._pending = None
         if self.stage == 0:
             if metrics is not None and score is not None:
-                self.surrogate = surrogate_minimum(self.axes, list(metrics), score, DENSE[len(self.lo)])
+                self.surrogate = surrogate_minimum(self.axes, list(metrics), score, DENSE[len(self.lo)], score_many)
             self.screened = True  # waits for `continue_search`
             return
         self._advance()
@@ -228,8 +230,9 @@ class EffectSearch:
 
 
 def surrogate_minimum(axes: list[np.ndarray], metrics: list[Metrics], score: Callable[[Metrics], float],
-                      dense: int) -> tuple[np.ndarray, float]:
-    """The minimum of score(interpolated conditions) on a dense grid over the nodes' range: (point, D)."""
+                      dense: int, score_many: ScoreMany | None = None) -> tuple[np.ndarray, float]:
+    """The minimum of score(interpolated conditions) on a dense grid over the nodes' range: (point, D);
+    `score_many` (when given) scores the whole grid at once."""
     keys = list(metrics[0])
     values = {k: np.array([m[k] for m in metrics], float) for k in keys}  # (nodes, E)
     if len(axes) == 1:
@@ -246,7 +249,10 @@ def surrogate_minimum(axes: list[np.ndarray], metrics: list[Metrics], score: Cal
         w = np.einsum("ai,bj->abij", *weights).reshape(dense * dense, -1)  # node order of itertools.product
         inter = {k: w @ np.nan_to_num(v, nan=np.nanmean(v)) for k, v in values.items()}
         points = np.array(list(itertools.product(*u)))
-    Ds = np.array([score({k: inter[k][j] for k in keys}) for j in range(len(points))])
+    if score_many is not None:
+        Ds = np.asarray(score_many(inter), float)
+    else:
+        Ds = np.array([score({k: inter[k][j] for k in keys}) for j in range(len(points))])
     j = int(np.nanargmin(Ds))
     return points[j], float(Ds[j])
 
@@ -296,9 +302,11 @@ def max_evaluations(effect: Effect, refined: bool = True) -> int:
 
 def search_effects(effects: Sequence[Effect], evaluate: Callable[[list[Applied]], list[Metrics]],
                    score: Callable[[Metrics], float], D0: float, n_conditions: int, top: int = TOP,
-                   progress: Callable[[int], None] | None = None) -> list[EffectFit]:
+                   progress: Callable[[int], None] | None = None,
+                   score_many: ScoreMany | None = None) -> list[EffectFit]:
     """Fit every effect (module docstring); `evaluate(applied list)` returns the conditions of each applied
-    effect (one batch per stage), `score(conditions)` their D; `progress(n)` after each batch."""
+    effect (one batch per stage), `score(conditions)` their D (`score_many`, optional: the D of many at once,
+    conditions shaped (P, E) -> (P,), used on the surrogate grids); `progress(n)` after each batch."""
     searches = [EffectSearch(e, D0, n_conditions) for e in effects]
     while True:
         asks = [(s, s.ask()) for s in searches if s.ask() is not None]
@@ -320,6 +328,6 @@ def search_effects(effects: Sequence[Effect], evaluate: Callable[[list[Applied]]
         start = 0
         for s, pts in asks:
             part = metrics[start:start + len(pts)]
-            s.tell(np.array([score(m) for m in part]), part, score)
+            s.tell(np.array([score(m) for m in part]), part, score, score_many)
             start += len(pts)
     return [s.result() for s in searches]

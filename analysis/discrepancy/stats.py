@@ -178,6 +178,62 @@ def compare(simulated: Mapping[str, np.ndarray], measured: Measured, reference: 
     return Comparison(tuple(gaps), alpha, float(sum(g.term for g in gaps)))
 
 
+def gap_measure(simulated: Mapping[str, np.ndarray], measured: Measured,
+                reference: Callable[[str], str | None]) -> np.ndarray:
+    """D of many simulations at once: `simulated` maps each condition to (P, E) per-eye values of P
+    simulations; returns (P,) equal to `compare(..., tests=False).D` of each row (NaN where a row has fewer
+    than 2 finite eyes). The search scores its dense surrogate grids with it."""
+    D = None
+    for name, cond in measured.conditions.items():
+        if name not in simulated:
+            raise ValueError(f"the simulation has no condition {name!r}; it has {', '.join(simulated)}")
+        ref = reference(name)
+        paired = measured.paired and cond.values is not None and ref in measured.conditions and \
+            measured.conditions[ref].values is not None
+        sim = np.asarray(simulated[name], float) - (np.asarray(simulated[ref], float) if paired else 0.0)
+        sim = np.atleast_2d(sim)
+        finite = np.isfinite(sim)
+        n = finite.sum(axis=1)
+        x = np.where(finite, sim, 0.0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = x.sum(axis=1) / n
+            dev = np.where(finite, sim - mean[:, None], 0.0)
+            s_sd = np.maximum(np.sqrt((dev**2).sum(axis=1) / (n - 1)), SD_FLOOR_DEG)
+            s_sd = np.where(n >= 2, s_sd, np.nan)
+            if cond.values is None and cond.sd is None:
+                df = n - 1.0
+                term = _normal_scores((mean - cond.mean) / (s_sd / np.sqrt(n)), df) ** 2
+            else:
+                meas = cond.values - measured.conditions[ref].values if paired else cond.values
+                m_mean = float(meas.mean()) if meas is not None else cond.mean
+                m_sd = max(float(meas.std(ddof=1)) if meas is not None else float(cond.sd), SD_FLOOR_DEG)
+                m_n = meas.size if meas is not None else cond.n
+                v1, v2 = s_sd**2 / n, m_sd**2 / m_n
+                t = (mean - m_mean) / np.sqrt(v1 + v2)
+                df = (v1 + v2) ** 2 / (v1**2 / (n - 1) + v2**2 / (m_n - 1))
+                m2, m4 = (dev**2).sum(axis=1), (dev**4).sum(axis=1)
+                count = n.astype(float)
+                if meas is not None:
+                    centred = meas - meas.mean()
+                    m2, m4, count = m2 + np.sum(centred**2), m4 + np.sum(centred**4), count + meas.size
+                m2, m4 = m2 / count, m4 / count
+                g2 = np.where(m2 > 0, np.maximum(0.0, m4 / np.where(m2 > 0, m2, 1.0) ** 2 - 3.0), 0.0)
+                se = np.sqrt((2.0 / (n - 1) + g2 / n) / 4.0 + (2.0 / (m_n - 1) + g2 / m_n) / 4.0)
+                z_spread = np.log(s_sd / m_sd) / se
+                term = _normal_scores(t, df) ** 2 + np.where(np.isnan(z_spread), 0.0, z_spread**2)
+        D = term if D is None else D + term
+    return np.asarray(D, float)
+
+
+def _normal_scores(t: np.ndarray, df: np.ndarray) -> np.ndarray:
+    """`normal_score` of arrays."""
+    t, df = np.broadcast_arrays(np.asarray(t, float), np.asarray(df, float))
+    tail = sps.t.sf(np.abs(t), df)
+    with np.errstate(invalid="ignore"):
+        z = np.where(tail > 1e-300, sps.norm.isf(np.clip(tail, 1e-300, None)), np.abs(t))
+    return np.copysign(np.minimum(z, np.abs(t)), t)
+
+
 def _gap(name: str, simulated: Mapping[str, np.ndarray], measured: Measured, reference, tests: bool) -> ConditionGap:
     if name not in simulated:
         raise ValueError(f"the simulation has no condition {name!r}; it has {', '.join(simulated)}")

@@ -46,7 +46,7 @@ import numpy as np
 from eyehil.analysis.discrepancy.data import Measured, MeasuredCondition
 from eyehil.analysis.discrepancy.metrics import Evaluator
 from eyehil.analysis.discrepancy.search import TOP, EffectFit, max_evaluations, search_effects
-from eyehil.analysis.discrepancy.stats import Comparison, compare, permutation_gof
+from eyehil.analysis.discrepancy.stats import Comparison, compare, gap_measure, permutation_gof
 from eyehil.emulator import effects as registry
 from eyehil.emulator.effects import Applied, Effect
 from eyehil.emulator.eye.model import EyeModel
@@ -178,6 +178,9 @@ def name_effects(evaluator: Evaluator, measured: Measured, before: Comparison, e
     def score(metrics) -> float:
         return compare(metrics, measured, evaluator.experiment.reference, alpha, tests=False).D
 
+    def score_many(metrics) -> np.ndarray:
+        return gap_measure(metrics, measured, evaluator.experiment.reference)
+
     def evaluate(batch: list[Applied]) -> list:
         out = []
         for i in range(0, len(batch), CHUNK):  # chunks, so that progress is heard every few seconds
@@ -185,7 +188,8 @@ def name_effects(evaluator: Evaluator, measured: Measured, before: Comparison, e
             progress.advance(len(batch[i:i + CHUNK]))
         return out
 
-    fits = search_effects(candidates(evaluator, effect_names), evaluate, score, before.D, before.n_terms)
+    fits = search_effects(candidates(evaluator, effect_names), evaluate, score, before.D, before.n_terms,
+                         score_many=score_many)
     return sorted(fits, key=lambda f: (f.screened, f.score))
 
 

@@ -1,10 +1,11 @@
 """A glint on the pupil's edge hides part of it, and the detected pupil centre moves away from the glint.
 
-Frame: image pixels. The forward model gives each fixation's pupil boundary as `pupil_points_px` (points
-evenly spaced around the apparent pupil, `pupil_points_valid`), whose mean is the pupil centre. A
-boundary point within `radius_px` of any glint is hidden by the glint's bright disc; a detector that
-estimates the centre from the visible boundary (a centroid, or an ellipse fit without robust outlier
-handling pulled by the gap) moves it by
+Frame: image pixels. The pupil's edge is the forward model's fitted pupil ellipse (`pupil_centre_px`,
+`pupil_axes_px`, `pupil_angle_deg`; it matches the ray-traced boundary to about 1e-6 px), sampled at
+`EDGE_SAMPLES` points evenly spaced in its parameter, whose mean is the pupil centre: the effect does not
+depend on how many boundary points were ray-traced. A point of the edge within `radius_px` of any glint is
+hidden by the glint's bright disc; a detector that estimates the centre from the visible boundary (a
+centroid, or an ellipse fit without robust outlier handling pulled by the gap) moves it by
 
     delta = bias x (mean of the visible points - mean of all points),
 
@@ -23,6 +24,9 @@ import numpy as np
 from eyehil.emulator.effects.base import Effect, Parameter, with_arrays
 from eyehil.emulator.features import Features
 
+#: points of the pupil's edge (the fitted ellipse) tested against the glints: 3 deg apart
+EDGE_SAMPLES = 120
+
 
 class GlintOcclusion(Effect):
     """The pupil centre pulled away from a glint that hides part of the pupil's edge (bias, 0..1)."""
@@ -39,7 +43,8 @@ class GlintOcclusion(Effect):
     def perturb(self, features: Features, values: Mapping[str, float], rng: np.random.Generator | None,
                 **kwargs: object) -> Features:
         bias, radius = float(values["bias"]), float(values["radius_px"])
-        points, ok = features.pupil_points_px, features.pupil_points_valid
+        points = edge_points(features)
+        ok = np.broadcast_to(features.pupil_valid[..., None], points.shape[:-1])
         gl = np.where(features.glint_valid[..., None], features.glint_px, np.inf)
         dist = np.linalg.norm(points[..., :, None, :] - gl[..., None, :, :], axis=-1)  # (..., N, L)
         visible = ok & np.all(dist > radius, axis=-1)
@@ -49,3 +54,14 @@ class GlintOcclusion(Effect):
         mean_vis = np.sum(np.where(visible[..., None], p, 0.0), axis=-2) / np.maximum(n_vis, 1)[..., None]
         shift = np.where(((n_vis > 2) & (n_vis < n_all))[..., None], mean_vis - mean_all, 0.0)
         return with_arrays(features, pupil_centre_px=features.pupil_centre_px + bias * shift)
+
+
+def edge_points(features: Features) -> np.ndarray:
+    """The fitted pupil ellipse sampled at EDGE_SAMPLES points, (..., EDGE_SAMPLES, 2) px (NaN where no pupil)."""
+    t = np.linspace(0.0, 2.0 * np.pi, EDGE_SAMPLES, endpoint=False)
+    phi = np.radians(features.pupil_angle_deg)[..., None]
+    a, b = features.pupil_axes_px[..., 0, None] / 2.0, features.pupil_axes_px[..., 1, None] / 2.0
+    u, v = a * np.cos(t), b * np.sin(t)
+    x = features.pupil_centre_px[..., 0, None] + u * np.cos(phi) - v * np.sin(phi)
+    y = features.pupil_centre_px[..., 1, None] + u * np.sin(phi) + v * np.cos(phi)
+    return np.stack([x, y], axis=-1)
