@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 from leaks import process_running
+from terminal import AS_FROM_A_TERMINAL
 
 from eyehil.analysis.output_folder import staged_folder
 from eyehil.parallel import run_chunks, worker_pool
@@ -124,7 +125,7 @@ def test_ctrl_c_stops_eyehil_study(tmp_path: Path) -> None:
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "eyehil", "study", "--eyes", "61", "--workers", "2", "--compare",
                              "none", "--out", str(out)], cwd=tmp_path, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, start_new_session=True)
+                            stderr=subprocess.PIPE, **AS_FROM_A_TERMINAL)
     err = bytearray()
 
     def read() -> None:

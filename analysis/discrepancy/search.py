@@ -240,14 +240,13 @@ def surrogate_minimum(axes: list[np.ndarray], metrics: list[Metrics], score: Cal
         grid = np.linspace(x[0], x[-1], dense)
         from scipy.interpolate import make_interp_spline
 
-        inter = {k: make_interp_spline(x, np.nan_to_num(v, nan=np.nanmean(v)), k=min(3, len(x) - 1), axis=0)(grid)
-                 for k, v in values.items()}
+        inter = {k: make_interp_spline(x, _filled(v), k=min(3, len(x) - 1), axis=0)(grid) for k, v in values.items()}
         points = grid[:, None]
     else:
         u = [np.linspace(a[0], a[-1], dense) for a in axes]
         weights = [_lagrange(a, g) for a, g in zip(axes, u, strict=True)]  # (dense, 3) each
         w = np.einsum("ai,bj->abij", *weights).reshape(dense * dense, -1)  # node order of itertools.product
-        inter = {k: w @ np.nan_to_num(v, nan=np.nanmean(v)) for k, v in values.items()}
+        inter = {k: w @ _filled(v) for k, v in values.items()}
         points = np.array(list(itertools.product(*u)))
     if score_many is not None:
         Ds = np.asarray(score_many(inter), float)
@@ -255,6 +254,13 @@ def surrogate_minimum(axes: list[np.ndarray], metrics: list[Metrics], score: Cal
         Ds = np.array([score({k: inter[k][j] for k in keys}) for j in range(len(points))])
     j = int(np.nanargmin(Ds))
     return points[j], float(Ds[j])
+
+
+def _filled(v: np.ndarray) -> np.ndarray:
+    """NaN (an eye a node could not simulate or calibrate) replaced by the mean of the finite values; a condition
+    with none (a Blignaut model that fails for every eye) by 0, which no measured condition refers to."""
+    finite = np.isfinite(v)
+    return np.where(finite, v, np.mean(v[finite]) if finite.any() else 0.0)
 
 
 def _lagrange(nodes: np.ndarray, x: np.ndarray) -> np.ndarray:

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 from leaks import process_running
 from solve_helpers import FAILING_X, GENEROUS_S, HeldSolver, closed_form
+from terminal import AS_FROM_A_TERMINAL
 
 from eyehil.drivers.client import open_tracker
 from eyehil.emulator.device import solve_process
@@ -199,7 +200,7 @@ def test_ctrl_c_stops_the_emulator_and_its_worker() -> None:
     """`eyehil emulate` on the real clock gets a STIMULUS (its worker starts), then a terminal's Ctrl-C (SIGINT
     to the whole process group): it exits 130 (issue 17), its worker is gone, and nothing printed a traceback."""
     proc = subprocess.Popen([sys.executable, "-m", "eyehil", "emulate", "--link", "tcp", "--duration", "300"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **AS_FROM_A_TERMINAL)
     workers: list[int] = []
     tracker = None
     try:
