@@ -30,7 +30,7 @@ from eyehil.analysis.discrepancy.guestrin import guestrin_metrics
 from eyehil.analysis.discrepancy.measured import load_recordings
 from eyehil.analysis.discrepancy.metrics import Evaluator
 from eyehil.analysis.discrepancy.recording import write_recording
-from eyehil.analysis.discrepancy.search import max_evaluations, search_effects
+from eyehil.analysis.discrepancy.search import max_evaluations, search_effects, surrogate_minimum
 from eyehil.analysis.discrepancy.stats import (
     compare,
     gap_measure,
@@ -249,6 +249,16 @@ def test_gap_measure_of_many_simulations_equals_compare_of_each(paired) -> None:
     D = gap_measure(sims, measured, reference)
     expected = [compare({k: v[j] for k, v in sims.items()}, measured, reference, tests=False).D for j in range(30)]
     np.testing.assert_allclose(D, expected, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("axes", [[np.linspace(0.0, 1.0, 5)], [np.linspace(0.0, 1.0, 3)] * 2])
+def test_surrogate_takes_a_condition_no_eye_could_give(axes) -> None:
+    """A Blignaut model that fails for every eye gives a condition of NaN only; the blignaut2014 run stopped on it
+    ("Array must not contain infs or nans"). The measured condition still decides the minimum."""
+    nodes = np.array(np.meshgrid(*axes, indexing="ij")).reshape(len(axes), -1).T
+    metrics = [{"C5": 1.0 + (x[0] - 0.3) ** 2 + np.zeros(4), "M9:C5": np.full(4, np.nan)} for x in nodes]
+    point, least = surrogate_minimum(axes, metrics, lambda m: float(np.mean(m["C5"])), 101)
+    assert point[0] == pytest.approx(0.3, abs=0.02) and least == pytest.approx(1.0, abs=1e-3)
 
 
 def test_holm_adjustment_known_answer() -> None:
