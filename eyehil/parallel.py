@@ -32,21 +32,11 @@ def default_workers() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
-def run_chunks(
-    func: Callable[..., Any],
-    chunks: Sequence[Any],
-    *,
-    sizes: Sequence[int],
-    workers: int | None = None,
-    scheduler: str | None = None,
-    progress: Callable[[int], None] | None = None,
-    **kwargs: Any,
-) -> list[Any]:
-    """func(chunk, **kwargs) for every chunk, in chunk order; serial when workers == 1, Dask when `scheduler` is
-    set."""
+def run_chunks(func: Callable[..., Any], chunks: Sequence[Any], **options: Any) -> list[Any]:
+    """func(chunk, **kwargs) for every chunk, in chunk order: `iter_chunks` (its options: sizes, workers,
+    scheduler, progress, and the keyword arguments of `func`) gathered into a list."""
     results: list[Any] = [None] * len(chunks)
-    for i, result in iter_chunks(func, chunks, sizes=sizes, workers=workers, scheduler=scheduler,
-                                 progress=progress, **kwargs):
+    for i, result in iter_chunks(func, chunks, **options):
         results[i] = result
     return results
 
@@ -61,8 +51,10 @@ def iter_chunks(
     progress: Callable[[int], None] | None = None,
     **kwargs: Any,
 ) -> Iterator[tuple[int, Any]]:
-    """(chunk index, func(chunk, **kwargs)) as each chunk finishes (in order when serial); `progress(size)` is told
-    after the caller has taken each result. Leaving the loop early (an error, Ctrl-C) stops the work at once."""
+    """(chunk index, func(chunk, **kwargs)) as each chunk finishes: in this process and in order when `workers` is
+    1 (or there is one chunk), on a local process pool of `workers` (default one per core), or on the Dask
+    cluster at `scheduler`. `progress(sizes[i])` is told after the caller has taken each result. Leaving the loop
+    early (an error, Ctrl-C) stops the work at once."""
     tell = progress or (lambda n: None)
     if scheduler:
         yield from _iter_dask(func, chunks, sizes, scheduler, tell, kwargs)
