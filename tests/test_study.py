@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -56,6 +57,23 @@ def test_per_eye_errors_are_finite_and_the_summary_matches_them(small_run) -> No
     # underdetermined fits are explicit failures, not numbers: models 3, 4, 7, 8 have > 5 terms at C5
     assert np.isnan(result.blignaut_errors[:, [2, 3, 6, 7], 0]).all()
     assert np.isfinite(result.blignaut_errors[:, :, 1:]).all()
+
+
+def test_eyes_without_an_error_are_left_out_and_reported(tmp_path, small_run) -> None:
+    """A large draw has an eye whose Blignaut fits all fail (10,000 Rozema eyes: the summary stopped with
+    'need at least 2 finite values, got 10000'). Such eyes are left out of the means and tests, and counted."""
+    result, _ = small_run
+    b = result.blignaut_errors.copy()
+    b[3] = np.nan
+    b[7, :, 0] = np.nan
+    h1 = result.h1.copy()
+    h1[5] = np.nan
+    damaged = replace(result, blignaut_errors=b, h1=h1)
+    summary = summarise_study(damaged)
+    assert summary["blignaut"]["eyes_without_error"] == {"C5": 2, "C9": 1, "C14": 1, "C18": 1, "C23": 1, "C135": 1}
+    assert summary["blignaut"]["one_sample_t"]["C9"]["df"] == 12
+    write_outputs(damaged, summary, tmp_path / "out")
+    assert "left out of the means and tests: C5 2, C9 1," in (tmp_path / "out" / "report.md").read_text()
 
 
 def test_parallel_and_serial_runs_agree() -> None:

@@ -197,6 +197,10 @@ def _blignaut_tables(s: dict[str, Any]) -> list[str]:
         lines.append(_row(c, f"{b['best_function'][c]['model']} / {rb['model']}",
                           f"{b['best_function'][c]['mean']:.3f} / {rb['mean']}",
                           f"{t['statistic']:.1f} ({t['df']:.0f}) {t['p']:.2g}"))
+    missing = {c: n for c, n in b.get("eyes_without_error", {}).items() if n}
+    if missing:
+        lines += ["", "Eyes without a best-function error (every fit failed or no valid sample), left out of the "
+                  "means and tests: " + ", ".join(f"{c} {n}" for c, n in missing.items()) + "."]
     return lines
 
 

@@ -54,7 +54,8 @@ class FTest:
 def _sample(a: Sequence[float] | np.ndarray, minimum: int = 2) -> np.ndarray:
     x = np.asarray(a, dtype=float).ravel()
     if x.size < minimum or not np.all(np.isfinite(x)):
-        raise ValueError(f"need at least {minimum} finite values, got {x.size}")
+        bad = int(np.count_nonzero(~np.isfinite(x)))
+        raise ValueError(f"need at least {minimum} values, all finite; got {x.size}, {bad} of them not finite")
     return x
 
 

@@ -83,7 +83,9 @@ def blignaut_summary(result: StudyResult) -> dict[str, Any]:
     return {
         "by_model": by_model,
         "best_function": best_functions(result.blignaut_errors),
-        "one_sample_t": {c: _test(stats.one_sample_t_test(v, real["best_error"][c])) for c, v in per_eye.items()},
+        "one_sample_t": {c: _test(stats.one_sample_t_test(v[np.isfinite(v)], real["best_error"][c]))
+                         for c, v in per_eye.items()},
+        "eyes_without_error": {c: int(np.count_nonzero(~np.isfinite(v))) for c, v in per_eye.items()},
         "real_best_function": {c: {"model": real["best_model"][c], "mean": real["best_error"][c]}
                                for c in CONFIGURATIONS},
         "failed_fits": [f for f in result.failures if "blignaut" in f],
