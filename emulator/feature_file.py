@@ -8,6 +8,9 @@ Two forms, chosen by the path:
   alone with ``numpy.load(path, mmap_mode="r")``;
 - ``FILE.npz``: the same arrays in one compressed NumPy archive (`numpy.load(FILE)`), as ``Features.save`` writes.
 
+An existing target is replaced only if it is an earlier output (a features folder, an empty folder, or a file
+for ``.npz``); anything else is refused before any work (`FileExistsError`).
+
 `FeatureWriter` takes chunks of eyes in any order (`write(first_eye, features)`), writing each straight into its
 rows of the ``.npy`` files with plain file I/O (no memory map, so nothing accumulates in the process's memory); a
 run that fails leaves no output (the folder is built beside the target as ``NAME.partial`` and renamed at the
@@ -42,6 +45,7 @@ class FeatureWriter:
         self.packed = self.path.suffix == ".npz"
         self.n_eyes = n_eyes
         self.stage = self.path.with_name(self.path.name + ".partial")
+        _check_replaceable(self.path, self.packed)
         self._files: dict[str, tuple[BinaryIO, int, int]] = {}  # name -> (file, header bytes, bytes per eye)
         self._meta: dict[str, Any] | None = None
         self._rows = np.zeros(n_eyes, dtype=bool)
@@ -103,9 +107,28 @@ class FeatureWriter:
             _pack(self.stage, self.path)
             shutil.rmtree(self.stage)
             return
+        _check_replaceable(self.path, self.packed)  # again: something may have appeared during the run
         if self.path.exists():
-            shutil.rmtree(self.path) if self.path.is_dir() else self.path.unlink()
+            shutil.rmtree(self.path)
         self.stage.rename(self.path)
+
+
+def _check_replaceable(path: Path, packed: bool) -> None:
+    """Refuse (before any work) a target that is not ours to replace: anything but an earlier features folder
+    (its meta.json says eyehil.features) or, for FILE.npz, a file."""
+    if not path.exists():
+        return
+    if packed and path.is_file():
+        return
+    if not packed and path.is_dir():
+        meta = path / "meta.json"
+        try:
+            ours = json.loads(meta.read_text()).get("format", "").startswith("eyehil.features/")
+        except (OSError, ValueError, AttributeError):
+            ours = False
+        if ours or not any(path.iterdir()):
+            return
+    raise FileExistsError(f"{path} exists and is not an earlier eyehil features output: choose another --out")
 
 
 def _pack(folder: Path, target: Path) -> None:

@@ -123,3 +123,22 @@ def test_dask_cluster_runs_the_same_chunks(whole) -> None:
 def test_bad_chunking_is_refused(capsys) -> None:
     assert main(["simulate", "--eyes", "sample:2", "--chunk-eyes", "0", "--quiet"]) == 2
     assert "--chunk-eyes must be >= 1" in capsys.readouterr().err
+
+
+def test_an_existing_target_is_replaced_only_if_it_is_an_earlier_output(tmp_path, capsys, whole) -> None:
+    """`--out ~` must not delete a home folder: a folder that is not an earlier output is refused before any
+    work and left as it was; an earlier output folder (or an .npz file) is replaced."""
+    _, features = whole
+    precious = tmp_path / "documents"
+    precious.mkdir()
+    (precious / "thesis.tex").write_text("years of work")
+    with pytest.raises(FileExistsError, match="not an earlier eyehil features output"):
+        FeatureWriter(precious, 5)
+    assert main(["simulate", "--eyes", "sample:2", "--points", "8", "--quiet", "--out", str(precious)]) == 1
+    assert "not an earlier eyehil features output" in capsys.readouterr().err
+    assert (precious / "thesis.tex").read_text() == "years of work" and len(list(precious.iterdir())) == 1
+    for target in (tmp_path / "earlier", tmp_path / "earlier.npz"):
+        for _ in range(2):  # the second run replaces the first
+            with FeatureWriter(target, 5) as out:
+                out.write(0, features)
+            _same(load_features(target), features)
