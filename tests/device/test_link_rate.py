@@ -11,7 +11,7 @@ import pytest
 from eyehil.emulator.device.build import DeviceOptions, build_subject, paced
 from eyehil.emulator.device.cli import options as cli_options
 from eyehil.emulator.device.cli import register
-from eyehil.emulator.device.clock import ManualClock
+from eyehil.emulator.device.clock import FastClock, ManualClock
 from eyehil.emulator.device.links.loop import open_loop
 from eyehil.emulator.device.links.paced import MAX_PACED_BACKLOG, PacedLink, Pacer, parse_link_rate
 from eyehil.emulator.device.tracker import VirtualTracker
@@ -125,6 +125,22 @@ def test_a_device_streaming_frames_over_full_speed_usb_meets_its_bandwidth() -> 
     status = [e.message for e in status if isinstance(e, Received) and isinstance(e.message, Status)]
     assert status and status[-1].samples_dropped == 0 and status[-1].frames_dropped >= 200
     core.close()
+
+
+def test_a_reply_goes_out_on_a_lockstep_clock_and_its_transmission_takes_device_time() -> None:
+    """`eyehil emulate --clock fast --link-rate usb-fs` never answered GET_INFO: its clock moves only when pushed,
+    nothing streamed to push it, and the pacer waited for device time that never came. The pump now pushes the
+    clock to when the waiting bytes have gone (and the runner need not sleep for them)."""
+    clock = FastClock(wall_floor=False)
+    inner = FakeLink()
+    link = PacedLink(inner, 1_216_000, clock)
+    link.attach(lambda data: None, lambda: None)
+    link.send(b"x" * 5000)  # a reply several 1 ms frames long
+    assert bytes(inner.data) == b"x" * 5000 and link.waiting == 0 and link.wake_delay_s() is None
+    assert clock.now_us() == -(-5000 * 1_000_000 // 1_216_000)  # 4.112 ms at 1,216,000 B/s
+    link.send(b"y" * 100)
+    assert len(inner.data) == 5100 and link.backlog() == 0
+    link.close()
 
 
 def test_the_option_reaches_the_command_line_and_is_refused_where_it_means_nothing() -> None:

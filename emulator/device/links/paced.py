@@ -85,6 +85,12 @@ class Pacer:
         self._idle = n == want
         return n
 
+    def drained_us(self, now_us: int, want: int) -> int:
+        """Device time by which all `want` bytes will have been admitted, if the link stays busy meanwhile."""
+        self._accrue(now_us)
+        need = int(want) * MICRO - self._credit
+        return self._t_us if need <= 0 else self._t_us + -(-need // self.rate_bps)
+
     def due_us(self, now_us: int, want: int) -> int:
         """Device time at which `min(want, burst)` bytes will be admissible (`now_us` if already)."""
         self._accrue(now_us)
@@ -133,9 +139,19 @@ class PacedLink:
         self.pump()
 
     def pump(self) -> int:
-        """Hand the wrapped link what the pacer admits now; return the bytes handed."""
+        """Hand the wrapped link what the pacer admits now; return the bytes handed. On a lockstep clock (a fast
+        clock without the wall floor: device time moves only when pushed) the transmission takes device time:
+        the clock is pushed to when everything waiting has gone, as a streaming runner pushes it to the next
+        sample (without this, nothing would move the clock while the device only answers, and a reply would
+        wait for ever)."""
         with self._lock:
-            n = self.pacer.admit(self.clock.now_us(), len(self._queue)) if self._queue else 0
+            n = 0
+            if self._queue:
+                now = self.clock.now_us()
+                n = self.pacer.admit(now, len(self._queue))
+                if n < len(self._queue) and _lockstep(self.clock):  # the link is busy from now on
+                    self.clock.push(self.pacer.drained_us(now, len(self._queue) - n))
+                    n += self.pacer.admit(self.clock.now_us(), len(self._queue) - n)
             data = bytes(self._queue[:n])
             del self._queue[:n]
         if data:
@@ -148,10 +164,13 @@ class PacedLink:
         return len(self._queue)
 
     def wake_delay_s(self) -> float | None:
-        """Wall seconds until the pacer admits more (None: nothing waits). On a fast or manual clock, device time
-        runs no slower than the wall clock would take to admit the bytes."""
+        """Wall seconds until the pacer admits more (None: nothing waits; 0 on a lockstep clock, whose `pump`
+        pushes device time). On a fast or manual clock, device time runs no slower than the wall clock would
+        take to admit the bytes."""
         if not self._queue:
             return None
+        if _lockstep(self.clock):
+            return 0.0
         now = self.clock.now_us()
         due = self.pacer.due_us(now, len(self._queue))
         delay = self.clock.wall_delay_s(due)
@@ -164,3 +183,8 @@ class PacedLink:
         with self._lock:
             self._queue.clear()
         self.inner.close()
+
+
+def _lockstep(clock: Clock) -> bool:
+    """A fast clock without the wall-clock floor: device time moves only when pushed."""
+    return bool(getattr(clock, "fast", False)) and not getattr(clock, "wall_floor", True)
