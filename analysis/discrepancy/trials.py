@@ -39,7 +39,7 @@ def draw(effect, rng: np.random.Generator) -> dict[str, float]:
 
 
 def trial(kind: str, index: int, *, experiment: str, search_eyes: int, show_eyes: int, hidden_eyes: int,
-          seed: int) -> dict:
+          seed: int, features: bool = False) -> dict:
     from eyehil.analysis.discrepancy.workflow import hidden_measured, run_discrepancy
     from eyehil.emulator import effects
     from eyehil.emulator.effects import Applied
@@ -57,11 +57,21 @@ def trial(kind: str, index: int, *, experiment: str, search_eyes: int, show_eyes
         hidden = [Applied.of(effects.get(names[i]), draw(effects.get(names[i]), rng)) for i in (a, b)]
     allowed = [n for n in names if not (kind == "outside" and n == hidden[0].effect.name)]
     eyes = sample(hidden_eyes, np.random.default_rng(seed + 7 + index)).eyes
-    measured = hidden_measured(hidden, eyes=eyes, experiment=experiment, seed=seed + 3 + index)
+    conditions = None
+    if features:  # as from recordings: the gaze conditions and every feature condition, per subject
+        from eyehil.analysis.discrepancy.metrics import Evaluator
+        from eyehil.analysis.discrepancy.recording import QUANTITIES
+
+        probe = Evaluator(experiment, eyes[:2])
+        gaze = probe.experiment.diagnostic_conditions(probe.host)
+        conditions = [*gaze, *(c for c in probe.base_metrics if ":" in c and c.split(":")[0] in QUANTITIES)]
+    measured = hidden_measured(hidden, eyes=eyes, experiment=experiment, conditions=conditions,
+                               seed=seed + 3 + index)
     start = time.perf_counter()
     result = run_discrepancy(measured, eyes=published_eyes()[:show_eyes], search_eyes=published_eyes()[:search_eyes],
                              effect_names=allowed, rounds=2, seed=seed)
-    record = {"kind": kind, "index": index, "experiment": experiment, "hidden": [a.label() for a in hidden],
+    record = {"kind": kind, "index": index, "experiment": experiment, "features": features,
+              "hidden": [a.label() for a in hidden],
               "hidden_values": {a.effect.name: dict(a.values) for a in hidden}, "seconds": time.perf_counter() - start,
               **result.summary()}
     return {**record, **score(record, result, hidden)}
@@ -99,13 +109,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--show-eyes", type=int, default=20)
     parser.add_argument("--hidden-eyes", type=int, default=20)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--features", action="store_true",
+                        help="measured data as from recordings: feature conditions besides the gaze errors")
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    path = out / f"trials-{args.experiment}-{args.kind}.jsonl"
+    path = out / f"trials-{args.experiment}-{args.kind}{'-features' if args.features else ''}.jsonl"
     for i in range(args.first, args.first + args.trials):
         rec = trial(args.kind, i, experiment=args.experiment, search_eyes=args.search_eyes, show_eyes=args.show_eyes,
-                    hidden_eyes=args.hidden_eyes, seed=args.seed)
+                    hidden_eyes=args.hidden_eyes, seed=args.seed, features=args.features)
         with path.open("a", encoding="utf-8") as f:
             f.write(json.dumps(rec, default=float) + "\n")
         print(json.dumps({k: rec[k] for k in ("kind", "index", "hidden", "outcome", "named_effects", "shrink",
