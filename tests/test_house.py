@@ -6,7 +6,9 @@ on the module it names (``import eyehil.a.b`` and ``from eyehil.a import b`` nam
 module), not on its parent packages' ``__init__``.
 
 The one-way rule: protocols imports no other layer; drivers imports protocols; emulator imports protocols and,
-of the host side, only the pure estimators in drivers/gaze; analysis may import all three.
+of the host side, only the pure estimators in drivers/gaze; analysis may import all three. `eyehil.parallel`
+(chunks of work on a process pool or Dask) lies below every layer: it imports no eyehil module, and the emulator
+(`eyehil simulate`) and analysis (the study, the discrepancy workflow) may use it.
 """
 
 from __future__ import annotations
@@ -21,9 +23,10 @@ LAYERS = ("emulator", "drivers", "protocols", "analysis")
 ALLOWED: dict[str, tuple[str, ...]] = {
     "protocols": ("eyehil.protocols",),
     "drivers": ("eyehil.drivers", "eyehil.protocols"),
-    "emulator": ("eyehil.emulator", "eyehil.protocols", "eyehil.drivers.gaze"),
-    "analysis": ("eyehil.analysis", "eyehil.emulator", "eyehil.drivers", "eyehil.protocols"),
+    "emulator": ("eyehil.emulator", "eyehil.protocols", "eyehil.drivers.gaze", "eyehil.parallel"),
+    "analysis": ("eyehil.analysis", "eyehil.emulator", "eyehil.drivers", "eyehil.protocols", "eyehil.parallel"),
 }
+LEAVES = ("eyehil.parallel",)  # shared below the layers: they import no eyehil module
 
 
 def _modules() -> dict[str, Path]:
@@ -116,6 +119,11 @@ def test_dependencies_point_one_way(layer: str) -> None:
     wrong = sorted(f"{name} -> {dep}" for name, deps in GRAPH.items() if name == prefix or name.startswith(prefix + ".")
                    for dep in deps if not any(dep == a or dep.startswith(a + ".") for a in ALLOWED[layer]))
     assert not wrong, "imports against DESIGN.md's one-way rule:\n" + "\n".join(wrong)
+
+
+@pytest.mark.parametrize("leaf", LEAVES)
+def test_shared_leaves_import_no_eyehil_module(leaf: str) -> None:
+    assert leaf in MODULES and not GRAPH[leaf]
 
 
 def test_the_walker_sees_a_circle_and_a_wrong_way_import(tmp_path: Path) -> None:
