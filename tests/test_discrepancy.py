@@ -152,8 +152,8 @@ def test_search_recovers_a_known_quadratic_minimum_and_its_curvature() -> None:
         x, y = (np.array([a.values[k] for a in batch]) for k in ("nasal_mm", "superior_mm"))
         return [{"D": np.array([d])} for d in 100 * ((x - 0.2) ** 2 + (y - 0.1) ** 2 + (x - 0.2) * (y - 0.1)) + 1]
 
-    def score(m):
-        return float(m["D"][0])
+    def score(m):  # conditions of several simulations: (P, 1)
+        return m["D"][:, 0]
 
     fit = search_effects([effects.get("head_roll")], roll, score, D0=100.0, n_conditions=7)[0]
     assert fit.values["roll_deg"] == pytest.approx(1.3, abs=1e-6) and abs(fit.D - 3.0) < 1e-9
@@ -175,7 +175,7 @@ def test_search_screens_many_effects_and_refines_only_the_best() -> None:
 
     names = ("feature_noise", "head_roll", "lens_distortion", "corneal_index", "led_position")
     chosen = [effects.get(n) for n in names]
-    fits = search_effects(chosen, bowl, lambda m: float(m["D"][0]), D0=100.0, n_conditions=7, top=2)
+    fits = search_effects(chosen, bowl, lambda m: m["D"][:, 0], D0=100.0, n_conditions=7, top=2)
     by = {f.effect.name: f for f in fits}
     assert by["head_roll"].values["roll_deg"] == pytest.approx(2.0, abs=1e-6) and not by["head_roll"].screened
     screened = [f for f in fits if f.screened]
@@ -186,7 +186,7 @@ def test_a_fit_at_the_edge_of_its_range_is_flagged_and_not_added() -> None:
     def falling(batch):  # D falls toward k1 = +3 (the bound) and beyond
         return [{"D": np.array([100.0 - 20.0 * a.values["k1"]])} for a in batch]
 
-    fit = search_effects([effects.get("lens_distortion")], falling, lambda m: float(m["D"][0]), D0=100.0,
+    fit = search_effects([effects.get("lens_distortion")], falling, lambda m: m["D"][:, 0], D0=100.0,
                          n_conditions=7)[0]
     assert fit.values["k1"] == pytest.approx(3.0) and fit.at_edge == ["k1"]
     assert fit.lowers() and not fit.passes()
@@ -257,7 +257,7 @@ def test_surrogate_takes_a_condition_no_eye_could_give(axes) -> None:
     ("Array must not contain infs or nans"). The measured condition still decides the minimum."""
     nodes = np.array(np.meshgrid(*axes, indexing="ij")).reshape(len(axes), -1).T
     metrics = [{"C5": 1.0 + (x[0] - 0.3) ** 2 + np.zeros(4), "M9:C5": np.full(4, np.nan)} for x in nodes]
-    point, least = surrogate_minimum(axes, metrics, lambda m: float(np.mean(m["C5"])), 101)
+    point, least = surrogate_minimum(axes, metrics, lambda m: np.mean(m["C5"], axis=-1), 101)
     assert point[0] == pytest.approx(0.3, abs=0.02) and least == pytest.approx(1.0, abs=1e-3)
 
 

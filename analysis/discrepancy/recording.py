@@ -69,6 +69,11 @@ def feature_conditions(features: Features, side: str = "right") -> dict[str, np.
     return out
 
 
+def feature_names(head_positions) -> list[str]:
+    """The names `feature_conditions` gives for these head positions (every quantity at each)."""
+    return [f"{q}:{getattr(h, 'name', str(i))}" for i, h in enumerate(head_positions) for q in QUANTITIES]
+
+
 def feature_reference(condition: str, first_head: str = "central") -> str | None:
     """A feature condition at another head position is compared to the same quantity at the first."""
     quantity, colon, head = condition.partition(":")

@@ -54,8 +54,8 @@ TOP = 3
 EDGE = 0.01
 
 Metrics = dict[str, np.ndarray]
-#: D of many simulations at once: conditions shaped (P, E) -> (P,)
-ScoreMany = Callable[[Metrics], np.ndarray]
+#: the gap measure D of P simulations at once: conditions shaped (P, E) -> (P,)
+Score = Callable[[Metrics], np.ndarray]
 
 
 @dataclass(frozen=True, eq=False)
@@ -166,14 +166,13 @@ class EffectSearch:
     def ask(self) -> np.ndarray | None:
         return self._pending
 
-    def tell(self, Ds: np.ndarray, metrics: Sequence[Metrics] | None = None,
-             score: Callable[[Metrics], float] | None = None, score_many: ScoreMany | None = None) -> None:
+    def tell(self, Ds: np.ndarray, metrics: Sequence[Metrics] | None = None, score: Score | None = None) -> None:
         self.points = np.vstack([self.points, self._pending])
         self.Ds = np.concatenate([self.Ds, np.asarray(Ds, float)])
         self._pending = None
         if self.stage == 0:
             if metrics is not None and score is not None:
-                self.surrogate = surrogate_minimum(self.axes, list(metrics), score, DENSE[len(self.lo)], score_many)
+                self.surrogate = surrogate_minimum(self.axes, list(metrics), score, DENSE[len(self.lo)])
             self.screened = True  # waits for `continue_search`
             return
         self._advance()
@@ -229,12 +228,11 @@ class EffectSearch:
                          self.screened)
 
 
-def surrogate_minimum(axes: list[np.ndarray], metrics: list[Metrics], score: Callable[[Metrics], float],
-                      dense: int, score_many: ScoreMany | None = None) -> tuple[np.ndarray, float]:
-    """The minimum of score(interpolated conditions) on a dense grid over the nodes' range: (point, D);
-    `score_many` (when given) scores the whole grid at once."""
-    keys = list(metrics[0])
-    values = {k: np.array([m[k] for m in metrics], float) for k in keys}  # (nodes, E)
+def surrogate_minimum(axes: list[np.ndarray], metrics: list[Metrics], score: Score,
+                      dense: int) -> tuple[np.ndarray, float]:
+    """The minimum of score(interpolated conditions) on a dense grid over the nodes' range: (point, D); the
+    whole grid is scored in one call."""
+    values = stacked(metrics)  # (nodes, E)
     if len(axes) == 1:
         x = axes[0]
         grid = np.linspace(x[0], x[-1], dense)
@@ -248,12 +246,14 @@ def surrogate_minimum(axes: list[np.ndarray], metrics: list[Metrics], score: Cal
         w = np.einsum("ai,bj->abij", *weights).reshape(dense * dense, -1)  # node order of itertools.product
         inter = {k: w @ _filled(v) for k, v in values.items()}
         points = np.array(list(itertools.product(*u)))
-    if score_many is not None:
-        Ds = np.asarray(score_many(inter), float)
-    else:
-        Ds = np.array([score({k: inter[k][j] for k in keys}) for j in range(len(points))])
+    Ds = np.asarray(score(inter), float)
     j = int(np.nanargmin(Ds))
     return points[j], float(Ds[j])
+
+
+def stacked(metrics: Sequence[Metrics]) -> Metrics:
+    """Conditions of several simulations, each (E,), as one (P, E) array per condition."""
+    return {k: np.array([m[k] for m in metrics], float) for k in metrics[0]}
 
 
 def _filled(v: np.ndarray) -> np.ndarray:
@@ -307,12 +307,11 @@ def max_evaluations(effect: Effect, refined: bool = True) -> int:
 
 
 def search_effects(effects: Sequence[Effect], evaluate: Callable[[list[Applied]], list[Metrics]],
-                   score: Callable[[Metrics], float], D0: float, n_conditions: int, top: int = TOP,
-                   progress: Callable[[int], None] | None = None,
-                   score_many: ScoreMany | None = None) -> list[EffectFit]:
+                   score: Score, D0: float, n_conditions: int, top: int = TOP,
+                   progress: Callable[[int], None] | None = None) -> list[EffectFit]:
     """Fit every effect (module docstring); `evaluate(applied list)` returns the conditions of each applied
-    effect (one batch per stage), `score(conditions)` their D (`score_many`, optional: the D of many at once,
-    conditions shaped (P, E) -> (P,), used on the surrogate grids); `progress(n)` after each batch."""
+    effect (one batch per stage), `score(conditions)` the D of each (conditions of P simulations, each (P, E), ->
+    (P,): a batch's nodes and a surrogate grid are scored in one call); `progress(n)` after each batch."""
     searches = [EffectSearch(e, D0, n_conditions) for e in effects]
     while True:
         asks = [(s, s.ask()) for s in searches if s.ask() is not None]
@@ -334,6 +333,6 @@ def search_effects(effects: Sequence[Effect], evaluate: Callable[[list[Applied]]
         start = 0
         for s, pts in asks:
             part = metrics[start:start + len(pts)]
-            s.tell(np.array([score(m) for m in part]), part, score, score_many)
+            s.tell(score(stacked(part)), part, score)
             start += len(pts)
     return [s.result() for s in searches]

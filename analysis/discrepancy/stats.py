@@ -151,9 +151,16 @@ def holm(p: np.ndarray) -> np.ndarray:
 
 def normal_score(t: float, df: float) -> float:
     """Phi^-1(F_t(t; df)) with the sign of t; t itself where the tail underflows."""
-    tail = float(sps.t.sf(abs(t), df))
-    z = float(sps.norm.isf(tail)) if tail > 1e-300 else abs(t)
-    return float(np.copysign(min(z, abs(t)), t))
+    return float(normal_scores(t, df))
+
+
+def normal_scores(t: np.ndarray, df: np.ndarray) -> np.ndarray:
+    """`normal_score` of arrays (broadcast)."""
+    t, df = np.broadcast_arrays(np.asarray(t, float), np.asarray(df, float))
+    tail = sps.t.sf(np.abs(t), df)
+    with np.errstate(invalid="ignore"):
+        z = np.where(tail > 1e-300, sps.norm.isf(np.clip(tail, 1e-300, None)), np.abs(t))
+    return np.copysign(np.minimum(z, np.abs(t)), t)
 
 
 def excess_kurtosis(*samples: np.ndarray) -> float:
@@ -163,9 +170,9 @@ def excess_kurtosis(*samples: np.ndarray) -> float:
     return max(0.0, float(np.mean(x**4) / m2**2 - 3.0)) if m2 > 0 else 0.0
 
 
-def log_sd_se(n1: int, n2: int, g2: float) -> float:
-    """Standard error of ln(s1 / s2) (Bonett 2006), excess kurtosis g2."""
-    return float(np.sqrt(sum((2.0 / (n - 1) + g2 / n) / 4.0 for n in (n1, n2))))
+def log_sd_se(n1: float | np.ndarray, n2: float | np.ndarray, g2: float | np.ndarray) -> float | np.ndarray:
+    """Standard error of ln(s1 / s2) (Bonett 2006), excess kurtosis g2 (scalars or arrays)."""
+    return np.sqrt((2.0 / (n1 - 1) + g2 / n1) / 4.0 + (2.0 / (n2 - 1) + g2 / n2) / 4.0)
 
 
 def compare(simulated: Mapping[str, np.ndarray], measured: Measured, reference: Callable[[str], str | None],
@@ -202,7 +209,7 @@ def gap_measure(simulated: Mapping[str, np.ndarray], measured: Measured,
             s_sd = np.where(n >= 2, s_sd, np.nan)
             if cond.values is None and cond.sd is None:
                 df = n - 1.0
-                term = _normal_scores((mean - cond.mean) / (s_sd / np.sqrt(n)), df) ** 2
+                term = normal_scores((mean - cond.mean) / (s_sd / np.sqrt(n)), df) ** 2
             else:
                 meas = cond.values - measured.conditions[ref].values if paired else cond.values
                 m_mean = float(meas.mean()) if meas is not None else cond.mean
@@ -218,20 +225,10 @@ def gap_measure(simulated: Mapping[str, np.ndarray], measured: Measured,
                     m2, m4, count = m2 + np.sum(centred**2), m4 + np.sum(centred**4), count + meas.size
                 m2, m4 = m2 / count, m4 / count
                 g2 = np.where(m2 > 0, np.maximum(0.0, m4 / np.where(m2 > 0, m2, 1.0) ** 2 - 3.0), 0.0)
-                se = np.sqrt((2.0 / (n - 1) + g2 / n) / 4.0 + (2.0 / (m_n - 1) + g2 / m_n) / 4.0)
-                z_spread = np.log(s_sd / m_sd) / se
-                term = _normal_scores(t, df) ** 2 + np.where(np.isnan(z_spread), 0.0, z_spread**2)
+                z_spread = np.log(s_sd / m_sd) / log_sd_se(n, m_n, g2)
+                term = normal_scores(t, df) ** 2 + np.where(np.isnan(z_spread), 0.0, z_spread**2)
         D = term if D is None else D + term
     return np.asarray(D, float)
-
-
-def _normal_scores(t: np.ndarray, df: np.ndarray) -> np.ndarray:
-    """`normal_score` of arrays."""
-    t, df = np.broadcast_arrays(np.asarray(t, float), np.asarray(df, float))
-    tail = sps.t.sf(np.abs(t), df)
-    with np.errstate(invalid="ignore"):
-        z = np.where(tail > 1e-300, sps.norm.isf(np.clip(tail, 1e-300, None)), np.abs(t))
-    return np.copysign(np.minimum(z, np.abs(t)), t)
 
 
 def _gap(name: str, simulated: Mapping[str, np.ndarray], measured: Measured, reference, tests: bool) -> ConditionGap:

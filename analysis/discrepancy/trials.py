@@ -59,12 +59,13 @@ def trial(kind: str, index: int, *, experiment: str, search_eyes: int, show_eyes
     eyes = sample(hidden_eyes, np.random.default_rng(seed + 7 + index)).eyes
     conditions = None
     if features:  # as from recordings: the gaze conditions and every feature condition, per subject
-        from eyehil.analysis.discrepancy.metrics import Evaluator
-        from eyehil.analysis.discrepancy.recording import QUANTITIES
+        from eyehil.analysis.discrepancy.metrics import experiment as named_experiment
+        from eyehil.analysis.discrepancy.recording import feature_names
+        from eyehil.emulator.scene import load_scene
 
-        probe = Evaluator(experiment, eyes[:2])
-        gaze = probe.experiment.diagnostic_conditions(probe.host)
-        conditions = [*gaze, *(c for c in probe.base_metrics if ":" in c and c.split(":")[0] in QUANTITIES)]
+        chosen = named_experiment(experiment)
+        host = load_scene(chosen.scene)
+        conditions = [*chosen.diagnostic_conditions(host), *feature_names(host.head_positions)]
     measured = hidden_measured(hidden, eyes=eyes, experiment=experiment, conditions=conditions,
                                seed=seed + 3 + index)
     start = time.perf_counter()

@@ -175,11 +175,11 @@ def name_effects(evaluator: Evaluator, measured: Measured, before: Comparison, e
     """Step 2: every candidate effect fitted (batched together), ranked by D + 2k (best first)."""
     progress = progress or Silent()
 
-    def score(metrics) -> float:
-        return compare(metrics, measured, evaluator.experiment.reference, alpha, tests=False).D
-
-    def score_many(metrics) -> np.ndarray:
-        return gap_measure(metrics, measured, evaluator.experiment.reference)
+    def score(metrics) -> np.ndarray:
+        D = gap_measure(metrics, measured, evaluator.experiment.reference)
+        if np.isnan(D).any():
+            raise ValueError("a simulation has fewer than 2 eyes with a finite value in some condition")
+        return D
 
     def evaluate(batch: list[Applied]) -> list:
         out = []
@@ -188,8 +188,7 @@ def name_effects(evaluator: Evaluator, measured: Measured, before: Comparison, e
             progress.advance(len(batch[i:i + CHUNK]))
         return out
 
-    fits = search_effects(candidates(evaluator, effect_names), evaluate, score, before.D, before.n_terms,
-                         score_many=score_many)
+    fits = search_effects(candidates(evaluator, effect_names), evaluate, score, before.D, before.n_terms)
     return sorted(fits, key=lambda f: (f.screened, f.score))
 
 

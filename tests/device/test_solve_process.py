@@ -14,7 +14,6 @@ import signal
 import subprocess
 import sys
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +21,7 @@ import pytest
 from leaks import process_running
 from solve_helpers import FAILING_X, GENEROUS_S, HeldSolver, closed_form
 from terminal import AS_FROM_A_TERMINAL
+from waiting import wait_until
 
 from eyehil.drivers.client import open_tracker
 from eyehil.emulator.device import solve_process
@@ -36,10 +36,7 @@ HERE = Path(__file__).resolve().parent
 
 def _until(condition, what: str) -> None:
     """Wait (generously) for a condition about a real process."""
-    deadline = time.monotonic() + GENEROUS_S
-    while not condition():
-        assert time.monotonic() < deadline, f"timed out waiting for {what}"
-        time.sleep(0.01)
+    wait_until(condition, what, GENEROUS_S)
 
 
 def _solve_workers(parent: int) -> list[int]:

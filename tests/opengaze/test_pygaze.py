@@ -8,6 +8,7 @@ import csv
 
 import pytest
 from opengaze_helpers import DEADLINE_S, angle_deg
+from waiting import wait_until
 
 opengaze = pytest.importorskip("pygaze._eyetracker.opengaze", reason="python-pygaze and lxml (test extra)")
 
@@ -60,10 +61,4 @@ def _near(scene, xy: tuple[float | None, float | None]) -> bool:
 
 
 def _wait_until(condition, what: str) -> None:
-    import time
-
-    end = time.monotonic() + DEADLINE_S
-    while not condition():
-        if time.monotonic() > end:
-            raise AssertionError(f"no {what} within {DEADLINE_S} s")
-        time.sleep(0.02)
+    wait_until(condition, what, DEADLINE_S)
