@@ -65,7 +65,7 @@ def _per_eye_csv(result: StudyResult, path: Path) -> None:
 def _draw(jobs: list[partial], workers: int | None) -> list[Path]:
     """Run the figure jobs (each writes one figure and returns its PNG path), in order; in a pool of worker
     processes when more than one worker is available (each figure is independent: the wall time halves on two
-    cores), else here. The pool is `runner.worker_pool`'s: Ctrl-C stops it at once (its docstring)."""
+    cores), else here. The pool is `eyehil.parallel.worker_pool`'s: Ctrl-C stops it at once (its docstring)."""
     workers = min(workers or default_workers(), len(jobs))
     if workers <= 1:
         return [job() for job in jobs]
