@@ -198,3 +198,63 @@ def test_apparent_pupil_through_a_toric_cornea_matches_a_per_ray_scipy_solve() -
         d = np.array([np.sin(sol.x[0]) * np.cos(sol.x[1]), np.sin(sol.x[0]) * np.sin(sol.x[1]), np.cos(sol.x[0])])
         exit_point, _ = _forward_trace(p, d, surfaces, indices)
         assert np.max(np.abs(pixel(exit_point) - pixel(a))) < 1e-4  # px
+
+
+def _tilted_optics() -> CorneaOptics:
+    """Tilted and decentred toric surfaces with different meridians: every frame change of the trace used."""
+    front = _biconic(7.85, 7.5, -0.25, -0.1, axis=15.0, tilt=(2.5, -1.5), apex=(0.3, -0.2, 0.0))
+    back = _biconic(6.6, 6.25, -0.3, -0.2, axis=100.0, tilt=(-1.0, 2.0), apex=(0.25, -0.15, -0.55))
+    return CorneaOptics(front, back, Plane(-3.6), np.asarray(1.0), np.asarray(1.376), np.asarray(1.3374))
+
+
+def test_component_wise_biconic_trace_equals_the_general_trace() -> None:
+    """`fused.trace_biconic` (the toric pupil solve's hot loop, each surface in its own frame) gives the numbers of
+    `trace_into_eye` to rounding and the same validity, over and beyond the cornea, cold and warm started."""
+    from eyehil.emulator.optics.fused import BiconicPair, trace_biconic
+    from eyehil.emulator.optics.pupil import trace_into_eye
+
+    optics = _tilted_optics()
+    q = RNG.uniform(-7.0, 7.0, (40, 60, 2))
+    cam = np.stack([RNG.uniform(-300, 300, (40, 1)), RNG.uniform(-300, 300, (40, 1)),
+                    RNG.uniform(5, 900, (40, 1))], axis=-1)
+    p, ok = trace_into_eye(optics, q, source=cam)
+    pair = BiconicPair.of(optics.anterior, optics.posterior, optics.pupil_plane, q.shape[:-1])
+    source = optics.anterior.in_surface_frame(cam)
+    eta1, eta2 = np.asarray(1.0 / 1.376), np.asarray(1.376 / 1.3374)
+    with np.errstate(invalid="ignore"):
+        x, y, ok2, t = trace_biconic(pair, eta1, eta2, q[..., 0], q[..., 1], tuple(np.moveaxis(source, -1, 0)))
+        near = q + RNG.uniform(-1e-3, 1e-3, q.shape)  # a neighbouring ray, started from this one's t
+        xw, yw, okw, _ = trace_biconic(pair, eta1, eta2, near[..., 0], near[..., 1],
+                                       tuple(np.moveaxis(source, -1, 0)), t)
+        xc, yc, okc, _ = trace_biconic(pair, eta1, eta2, near[..., 0], near[..., 1],
+                                       tuple(np.moveaxis(source, -1, 0)))
+    assert 0.2 < ok.mean() < 0.95  # both outcomes exercised
+    np.testing.assert_array_equal(ok2, ok)
+    np.testing.assert_allclose(np.stack([x, y], axis=-1)[ok], p[ok][:, :2], atol=1e-11, rtol=0)
+    assert np.isfinite(t[ok2]).all() and np.isnan(t).any()  # NaN where the posterior is missed
+    np.testing.assert_array_equal(okw, okc)
+    np.testing.assert_allclose(np.stack([xw, yw], axis=-1)[okc], np.stack([xc, yc], axis=-1)[okc], atol=1e-11,
+                               rtol=0)
+
+
+def test_warm_started_toric_pupil_solve_equals_the_general_newton() -> None:
+    """`solve_exit_points` on biconics (component-wise, warm-started posterior, subset Newton) finds the exit
+    points of the general-path Newton (`trace_into_eye` residuals) to 1e-9 mm."""
+    from eyehil.emulator.optics.newton import newton2d
+    from eyehil.emulator.optics.pupil import _first_guess, trace_into_eye
+
+    optics = _tilted_optics()
+    camera = np.stack([RNG.uniform(-200, 200, (25, 1)), RNG.uniform(-150, 150, (25, 1)),
+                       RNG.uniform(400, 800, (25, 1))], axis=-1)
+    target = pupil_boundary(np.array([0.3, -0.2]), np.asarray(2.2), np.asarray(-3.6), 24)
+    exits = solve_exit_points(optics, camera, target)
+
+    def residual(q):
+        p, ok = trace_into_eye(optics, q, source=camera)
+        return p[..., :2] - target[..., :2], ok
+
+    general = newton2d(residual, _first_guess(optics, camera, target), max_step=0.5)
+    a, _ = optics.anterior.point(general.q)
+    assert exits.valid.mean() > 0.9
+    np.testing.assert_array_equal(exits.valid, general.ok & (np.linalg.norm(general.residual, axis=-1) <= 1e-6))
+    np.testing.assert_allclose(exits.point[exits.valid], a[exits.valid], atol=1e-9, rtol=0)

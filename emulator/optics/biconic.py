@@ -145,6 +145,10 @@ class Biconic:
         x, y, _ = self._to_surface(p)
         return np.stack([x, y], axis=-1)
 
+    def in_surface_frame(self, p: np.ndarray) -> np.ndarray:
+        """Eye-local points p (..., 3) in the surface frame (x', y', z') (..., 3)."""
+        return np.stack(self._to_surface(p), axis=-1)
+
     def normal(self, p: np.ndarray) -> np.ndarray:
         """Unit outward normal (..., 3, eye-local) at surface points p."""
         x, y, _ = self._to_surface(p)

@@ -24,7 +24,7 @@ import numpy as np
 
 from eyehil.emulator.optics.biconic import Biconic
 from eyehil.emulator.optics.conic import Conic, Plane
-from eyehil.emulator.optics.fused import trace_conic
+from eyehil.emulator.optics.fused import BiconicPair, trace_biconic, trace_conic
 from eyehil.emulator.optics.newton import newton2d
 from eyehil.emulator.optics.rays import _dot, refract, unit
 
@@ -80,6 +80,8 @@ def solve_exit_points(optics: CorneaOptics, camera: np.ndarray, target: np.ndarr
     q0 = _first_guess(optics, camera, target)
     if isinstance(optics.anterior, Conic) and isinstance(optics.posterior, Conic):
         sol = newton2d(_conic_residual(optics, camera, target, q0.shape[:-1]), q0, max_step=0.5, subset=True)
+    elif isinstance(optics.anterior, Biconic) and isinstance(optics.posterior, Biconic):
+        sol = newton2d(_biconic_residual(optics, camera, target, q0.shape[:-1]), q0, max_step=0.5, subset=True)
     else:
         sol = newton2d(residual, q0, max_step=0.5)
 
@@ -104,6 +106,36 @@ def _conic_residual(optics: CorneaOptics, camera: np.ndarray, target: np.ndarray
         x, y, ok = trace_conic(Conic(*f[0:4]), Conic(*f[4:8]), Plane(f[8]), f[9], f[10], q[..., 0], q[..., 1],
                                f[11:14])
         return np.stack([x - f[14], y - f[15]], axis=-1), ok
+
+    return residual
+
+
+def _biconic_residual(optics: CorneaOptics, camera: np.ndarray, target: np.ndarray, batch: tuple[int, ...]):
+    """The residual of `solve_exit_points` for biconic corneas, traced component-wise (`fused.trace_biconic`,
+    equal to `trace_into_eye` to rounding), evaluable on a subset of the batch (`newton2d(subset=True)`).
+
+    The posterior intersection has no closed form; each element's Newton starts from the t its last trace
+    found (the Jacobian's neighbouring rays, 1e-7 mm away, or the previous iterate): two steps instead of
+    four from the guide quadric."""
+    eta1 = np.asarray(optics.n_air, dtype=float) / np.asarray(optics.n_cornea, dtype=float)
+    eta2 = np.asarray(optics.n_cornea, dtype=float) / np.asarray(optics.n_aqueous, dtype=float)
+    pair = BiconicPair.of(optics.anterior, optics.posterior, optics.pupil_plane, batch)
+    source = optics.anterior.in_surface_frame(camera)
+    fields = tuple(np.broadcast_to(v, batch) for v in (eta1, eta2, source[..., 0], source[..., 1], source[..., 2],
+                                                       target[..., 0], target[..., 1]))
+
+    last_t: np.ndarray | None = None  # the posterior t of each element's latest trace (NaN: none)
+
+    def residual(q: np.ndarray, index: tuple[np.ndarray, ...] | None) -> tuple[np.ndarray, np.ndarray]:
+        nonlocal last_t
+        f, sub = (fields, pair) if index is None else (tuple(v[index] for v in fields), pair.take(index))
+        start = None if last_t is None else (last_t if index is None else last_t[index])
+        x, y, ok, t = trace_biconic(sub, f[0], f[1], q[..., 0], q[..., 1], f[2:5], start)
+        if index is None:
+            last_t = t
+        else:
+            last_t[index] = t
+        return np.stack([x - f[5], y - f[6]], axis=-1), ok
 
     return residual
 
