@@ -2,10 +2,11 @@
 
 `SCREEN_PX` is the X server's screen (xvfb-run -s "-screen 0 1920x1080x24"). `session(config, calibrate,
 sample, seconds)` opens a full-screen window on the guestrin2006 scene's monitor, starts ioHub's server (tried
-again when its process does not answer within ioHub's fixed 30 s: a busy machine), runs `calibrate(tracker)`,
-prints ``READY``, waits for a line on stdin (the test moves the simulated subject's gaze meanwhile), records
-for `seconds` and prints ``SAMPLE <json>`` for every event `sample(event, to_fraction)` turns into a dict, then
-``DONE``. `to_fraction(x, y)` converts ioHub's display coordinates to screen fractions (top-left origin).
+again when its process does not answer within ioHub's fixed 30 s: a busy machine), prints ``LAUNCHED``, runs
+`calibrate(tracker)`, prints ``READY``, waits for a line on stdin (the test moves the simulated subject's gaze
+meanwhile), records for `seconds` and prints ``SAMPLE <json>`` for every event `sample(event, to_fraction)`
+turns into a dict, then ``DONE``. `to_fraction(x, y)` converts ioHub's display coordinates to screen fractions
+(top-left origin).
 """
 
 import json
@@ -38,6 +39,7 @@ def session(config: dict, calibrate, sample, seconds: float) -> int:
     io = launch({**config, "window": window})
     try:
         tracker = io.devices.tracker
+        print("LAUNCHED", flush=True)  # where a hang was: before or in the calibration
         calibrate(tracker)
         left, top, right, bottom = io.devices.display.getCoordBounds()
 

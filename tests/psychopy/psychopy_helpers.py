@@ -53,12 +53,16 @@ class Script:
             self._queue.put(line.rstrip("\n"))
         self._queue.put(None)
 
-    def line(self, prefix: str) -> str:
-        """The rest of the next line that starts with `prefix`."""
+    def line(self, prefix: str, within_s: float | None = None) -> str:
+        """The rest of the next line that starts with `prefix`; `TimeoutError` if none comes within `within_s`
+        (AssertionError at the script's deadline)."""
+        end = self.end if within_s is None else min(self.end, time.monotonic() + within_s)
         while True:
             try:
-                line = self._queue.get(timeout=max(0.1, self.end - time.monotonic()))
+                line = self._queue.get(timeout=max(0.1, end - time.monotonic()))
             except queue.Empty:
+                if end < self.end:
+                    raise TimeoutError(f"no {prefix!r} line within {within_s} s") from None
                 raise AssertionError(f"no {prefix!r} line within {DEADLINE_S} s:\n" + self.tail()) from None
             if line is None:
                 raise AssertionError(f"the script ended before a {prefix!r} line:\n" + self.tail())
