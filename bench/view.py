@@ -6,7 +6,8 @@ view (`eyehil.drivers.view.server.ViewServer`) runs in this process and a real h
 driven by Playwright) shows the page. Two streams, features and images both: 250 Hz (the device renders what
 it can, the rest counted in its
 `frames_dropped` by design) and 60 Hz (an image for every exposure). Over `SECONDS` of wall time: samples per
-second received, images per second the page received and drew (its own count, window.eyehilView), and the loss
+second received, images per second the page received and drew (its own count, window.eyehilView; beside it the
+page's animation frames per second, the most images it can draw), and the loss
 counters that must stay at zero: the device's `samples_dropped`, the host's lost frames, overflowed samples and
 incomplete images, and the messages the view dropped for a slow page. Target (issue 14): with 250 Hz features
 and 60 Hz frames, loss counters zero; the page draws every image at 60 Hz (>= `TARGET_FPS`). The page keeps up
@@ -75,16 +76,19 @@ def _with_page(browser, url: str, seconds: float) -> dict:
         page.goto(view.address)
         page.wait_for_function("window.eyehilView.imagesDrawn > 10 && window.eyehilView.stats.samples_sent > 0",
                                timeout=60_000)
-        before, drawn0, start = _counters(view), page.evaluate("window.eyehilView.imagesDrawn"), time.perf_counter()
+        count = ("[window.eyehilView.imagesDrawn, window.eyehilView.animationFrames, window.eyehilView.imagesReceived,"
+                 " window.eyehilView.imagesSkipped]")
+        before, (drawn0, frames0, got0, skip0), start = _counters(view), page.evaluate(count), time.perf_counter()
         time.sleep(seconds)
-        drawn1, after = page.evaluate("window.eyehilView.imagesDrawn"), _counters(view)
+        (drawn1, frames1, got1, skip1), after = page.evaluate(count), _counters(view)
         elapsed = time.perf_counter() - start
         time.sleep(1.2)  # one more STATUS poll: the device's drops up to the end of the window
         final = _counters(view)
         page.close()
     delta = {k: after[k] - before.get(k, 0) for k in after}
     return {"samples_per_s": delta["samples"] / elapsed, "images_per_s": delta["images"] / elapsed,
-            "page_fps": (drawn1 - drawn0) / elapsed,
+            "page_fps": (drawn1 - drawn0) / elapsed, "animation_fps": (frames1 - frames0) / elapsed,
+            "page_received_per_s": (got1 - got0) / elapsed, "page_skipped": skip1 - skip0,
             "frames_dropped": final["frames_dropped"] - before["frames_dropped"],
             "loss": {k: final[k] - before.get(k, 0) for k in LOSS}}
 
@@ -107,7 +111,9 @@ def report(results: dict) -> str:
         lossless = not any(r["loss"].values())
         parts.append(f"{rate} Hz: {r['samples_per_s']:.0f} samples/s, {r['images_per_s']:.1f} images/s received "
                      f"(a bare host: {r['bare_images_per_s']:.1f}), "
-                     f"page drew {r['page_fps']:.1f}/s (device skipped {r['frames_dropped']} images by design); "
+                     f"page received {r['page_received_per_s']:.1f}/s, drew {r['page_fps']:.1f}/s "
+                     f"({r['page_skipped']} skipped) in {r['animation_fps']:.1f} animation frames/s "
+                     f"(device skipped {r['frames_dropped']} images by design); "
                      f"loss counters {'all zero' if lossless else r['loss']}")
     lossless = all(not any(r["loss"].values()) for r in results.values())
     r60 = results.get(60)

@@ -60,7 +60,7 @@ class LiveStream:
         self.records: dict[tuple[int, int], dict] = {}  # (frame id, eye) -> record: the overlay of its image
         self.truths: dict[tuple[int, int], dict] = {}  # (frame id, eye) -> the device's record ("detect" mode)
         self.gaze: np.ndarray | None = None
-        self._last_image: dict[int, float] = {}
+        self._last_image: dict[int, float] = {}  # eye -> device time (s) of the last image shown
         self.stats.reset()
 
     def add(self, samples: list[Sample], gaze: np.ndarray, sync: ClockSync | None) -> None:
@@ -89,14 +89,18 @@ class LiveStream:
                 _remember(self.truths, (sample.frame_id, int(record.eye)),
                           {**eye_record(record), "frame_id": sample.frame_id})
 
-    def image(self, got: ReceivedImage, now_s: float) -> tuple[bytes, dict | None] | None:
-        """The image message of `got` with the records of its exposure, and its record; None if this eye had an
-        image less than 1 / max_image_hz ago (counted in `images_skipped`)."""
+    def image(self, got: ReceivedImage) -> tuple[bytes, dict | None] | None:
+        """The image message of `got` with the records of its exposure, and its record; None if this eye's last
+        image shown was exposed less than 1 / max_image_hz before it, in device time (counted in
+        `images_skipped`). Device time, not arrival: images that arrive together (a link or a loop that delivers
+        in bursts) are all shown, and only a device faster than max_image_hz is thinned."""
         image, eye = got.image, int(got.image.eye)
-        if now_s - self._last_image.get(eye, -1e9) < self.image_s:
+        t = got.device_us / 1e6
+        last = self._last_image.get(eye)
+        if last is not None and 0.0 <= t - last < self.image_s:  # earlier than the last: a new stream
             self.images_skipped += 1
             return None
-        self._last_image[eye] = now_s
+        self._last_image[eye] = t
         record = self.records.get((image.frame_id, eye))
         message = image_message(image.eye, image.frame_id, (image.roi_x, image.roi_y), image.pixels, got.device_us,
                                 record, self.truths.get((image.frame_id, eye)))

@@ -7,7 +7,7 @@ detects and the device's FEATURES are drawn as the reference, on the emulator th
 the device streams images) and starts it. It publishes dicts (`payload`) and binary image messages through
 `publish` (thread-safe, e.g. `Hub.publish_threadsafe`): "hello" (the device), "state" (twice a second and on
 every change), "tick" (`tick_hz` times a second: the samples since the last tick, the last record of each eye,
-gaze, target and health), images (at most `max_image_hz` per eye), "script", "calibration".
+gaze, target and health), images (at most `max_image_hz` per eye in device time), "script", "calibration".
 
 Commands (`submit`, bounded queue): start, stop, script (fixations | pursuit | grid | none), calibrate
 (guestrin | blignaut; `eyehil.drivers.calibration.calibrate` through an `ObservedTracker`, so its samples and targets
@@ -294,7 +294,7 @@ class ViewSession:
         self._publish_tick_if_due()
 
     def _take(self) -> tuple[list[Sample], list[ReceivedImage]]:
-        """The samples and images received so far (images: the newest per eye)."""
+        """The samples and images received so far (the wire and the reader bound both)."""
         wire = self.tracker.wire
         if self.reader is None:
             samples = list(wire.samples)
@@ -311,16 +311,14 @@ class ViewSession:
                 except TrackerTimeoutError:
                     break
                 images.extend(self.reader.last_images)
-        newest = {got.image.eye: got for got in images}
-        self.live.images_skipped += len(images) - len(newest)
-        return samples, list(newest.values())
+        return samples, images
 
     def _process(self, samples: list[Sample]) -> None:
         screen = None if self.geometry is None else self.geometry.screen
         self.live.add(samples, estimate_gaze(samples, self.result, screen), self.sync)
 
     def _image(self, got: ReceivedImage) -> None:
-        shown = self.live.image(got, time.monotonic())
+        shown = self.live.image(got)
         if shown is not None:
             self.publish(shown[0])
             if self.recorder is not None:

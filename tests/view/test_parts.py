@@ -210,3 +210,20 @@ def test_a_slow_page_loses_images_and_ticks_before_state_changes():
     assert len(queued) == CLIENT_QUEUE
     assert queued[0] == {"type": "state", "calibrating": "guestrin"} and queued[-1]["type"] == "calibration"
     assert queued[-2] == b"image %d" % (3 * CLIENT_QUEUE - 1)  # the newest of the rest kept
+
+
+def test_images_are_thinned_by_device_time_not_by_arrival():
+    """Images that arrive together (a bursty link or loop) are all shown; only images exposed less than
+    1 / max_image_hz after the last one shown are skipped; a device time that goes back is a new stream."""
+    from eyehil.drivers.view.live import LiveStream
+    from eyehil.drivers.wire import ReceivedImage
+
+    live = LiveStream(max_image_hz=120.0)
+    pixels = np.zeros((4, 4), np.uint8)
+
+    def got(frame: int, device_ms: float) -> ReceivedImage:  # every one arrives at the same host time
+        return ReceivedImage(Image(frame, Eye.RIGHT, 0, 0, pixels), int(device_ms * 1000), 0, frame)
+
+    shown = [live.image(got(k, t)) is not None for k, t in enumerate((0.0, 16.7, 33.3, 35.0, 50.0, 10.0))]
+    assert shown == [True, True, True, False, True, True]
+    assert live.images_skipped == 1

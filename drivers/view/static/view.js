@@ -14,10 +14,10 @@ const view = window.eyehilView = {
   eyes: { right: {}, left: {} },     // per eye: image (ImageBitmap), header, record, window, overlay, source
   overlay: {},                       // per eye: what the last drawing put where (canvas px), for the tests
   gaze: null, target: null, trail: [], script: { name: "none", points: [] }, calibration: null,
-  history: [], stats: {}, imagesDrawn: 0, imagesReceived: 0, imagesSkipped: 0, ticks: 0, fps: 0, ips: 0, drawnFrameIds: {},
+  history: [], stats: {}, imagesDrawn: 0, imagesReceived: 0, imagesSkipped: 0, ticks: 0, animationFrames: 0, fps: 0, ips: 0, drawnFrameIds: {},
 };
 const $ = (id) => document.getElementById(id);
-let socket = null, dirty = true;
+let socket = null, dirty = true, eyesDirty = false;  // dirty: redraw all; eyesDirty: the eye images only
 
 // --- connection ------------------------------------------------------------------------------
 function connect() {
@@ -95,7 +95,7 @@ async function onImage(buffer) {
   e.queue = e.queue || [];
   e.queue.push({ bitmap, header });
   while (e.queue.length > JITTER) { e.queue.shift().bitmap.close(); view.imagesSkipped += 1; }
-  dirty = true;
+  eyesDirty = true;  // the screen and the chart change with the messages (ticks, 30 a second), not the images
 }
 
 function nextImage(e) {
@@ -107,15 +107,17 @@ function nextImage(e) {
 
 // --- drawing ---------------------------------------------------------------------------------
 function render() {
-  if (dirty) {
-    dirty = false;
+  view.animationFrames += 1;
+  if (dirty || eyesDirty) {
+    const all = dirty;
+    dirty = eyesDirty = false;
     for (const eye of EYES) {
       const e = view.eyes[eye];
       nextImage(e);
-      if (e.queue && e.queue.length) dirty = true;  // more waiting: the next frame shows the next one
+      if (e.queue && e.queue.length) eyesDirty = true;  // more waiting: the next frame shows the next one
     }
     for (const eye of EYES) drawEye(eye);
-    drawScreen(); drawChart();
+    if (all) { drawScreen(); drawChart(); }
   }
   requestAnimationFrame(render);
 }
@@ -304,7 +306,8 @@ function showStats() {
   $("dropped").title = `device: ${s.samples_dropped || 0}; host: ${s.samples_overflowed || 0}`;
   $("skipped").textContent = String(s.frames_dropped || 0);
   $("view-dropped").textContent = String(s.view_dropped || 0);
-  $("view-dropped").title = `${s.images_skipped || 0} images received but not shown (newer ones came first)`;
+  $("view-dropped").title = `${s.images_skipped || 0} images received but not sent (faster than the view's image rate), ` +
+    `${view.imagesSkipped} not drawn (newer ones waiting)`;
 }
 
 function showCalibration() {
