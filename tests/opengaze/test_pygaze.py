@@ -13,6 +13,7 @@ from waiting import wait_until
 opengaze = pytest.importorskip("pygaze._eyetracker.opengaze", reason="python-pygaze and lxml (test extra)")
 
 TARGET = (0.3, 0.7)  # screen fractions, top-left origin: left of centre, below it
+NEXT = (0.7, 0.3)  # where the gaze goes after the samples at TARGET
 SETTLE_US = 600_000  # the subject's latency (0.2 s) and saccade, with a margin
 
 
@@ -39,13 +40,19 @@ def test_connect_calibrate_and_read_gaze(server, tmp_path) -> None:
         srv.show(TARGET)
         tracker.start_recording()  # returns nothing; the REC records that follow show it worked
         _wait_until(lambda: _near(scene, tracker.sample()), "gaze near the target")
-        _wait_until(lambda: srv.device.clock.now_us() > shown_us + SETTLE_US + 1_000_000, "1 s of samples")
+        recording_us = max(srv.device.clock.now_us(), shown_us + SETTLE_US)  # records flow and have settled
+        _wait_until(lambda: srv.device.clock.now_us() > recording_us + 1_000_000, "1 s of samples")
+        # The client reads in its own thread and close() stops it, dropping what it has not read yet: move the
+        # gaze on and wait until the client reports it there, so that it has read every sample before the move.
+        moved_us = srv.device.clock.now_us()
+        srv.show(NEXT)
+        _wait_until(lambda: _near(scene, tracker.sample(), NEXT), "the client read past the first target")
         tracker.stop_recording()
     finally:
         tracker.close()
     with open(tmp_path / "pygaze.tsv") as log:
         rows = list(csv.DictReader(log, delimiter="\t"))
-    settled = [r for r in rows if r["TIME_TICK"] and int(r["TIME_TICK"]) > shown_us + SETTLE_US]
+    settled = [r for r in rows if r["TIME_TICK"] and shown_us + SETTLE_US < int(r["TIME_TICK"]) < moved_us]
     assert len(settled) >= 30
     for r in settled:
         assert r["BPOGV"] == "1" and r["LPOGV"] == "1" and r["RPOGV"] == "1" and r["LPV"] == "1"
@@ -56,8 +63,8 @@ def test_connect_calibrate_and_read_gaze(server, tmp_path) -> None:
     assert counts == sorted(counts) and len(set(counts)) == len(counts)
 
 
-def _near(scene, xy: tuple[float | None, float | None]) -> bool:
-    return xy[0] is not None and angle_deg(scene, TARGET, xy) < 1.0
+def _near(scene, xy: tuple[float | None, float | None], target: tuple[float, float] = TARGET) -> bool:
+    return xy[0] is not None and angle_deg(scene, target, xy) < 1.0
 
 
 def _wait_until(condition, what: str) -> None:
