@@ -60,19 +60,27 @@ _SCALARS = frozenset({str, int, float, bool, bytes, type(None)})
 
 
 def _check_keys(value: Any, depth: int = 0) -> None:
-    """PupilMessageError unless every map key in `value` is a string and containers nest at most `MAX_DEPTH`."""
+    """PupilMessageError unless every map key in `value` is a string and containers nest at most `MAX_DEPTH`.
+
+    Exact dicts, lists and tuples are tested by type first: the Mapping ABC check is slow, and the facade packs
+    about 3,000 datums a second."""
     if depth > MAX_DEPTH:
         raise PupilMessageError(f"payload nested deeper than {MAX_DEPTH} levels")
-    if isinstance(value, dict | Mapping):
-        for key, item in value.items():
+    kind = type(value)
+    if kind is list or kind is tuple:
+        items = value
+    elif kind is dict or isinstance(value, Mapping):
+        for key in value:
             if not isinstance(key, str):
                 raise PupilMessageError(f"payload map key {key!r} is not a string")
-            if type(item) not in _SCALARS:
-                _check_keys(item, depth + 1)
+        items = value.values()
     elif isinstance(value, list | tuple):
-        for item in value:
-            if type(item) not in _SCALARS:
-                _check_keys(item, depth + 1)
+        items = value
+    else:
+        return
+    for item in items:
+        if type(item) not in _SCALARS:
+            _check_keys(item, depth + 1)
 
 
 def pack(payload: Mapping[str, Any]) -> list[bytes]:
