@@ -57,13 +57,15 @@ class RenderJob:
     region: tuple[int, int, int, int] | None = None
     eye_indices: tuple[int, ...] = ()
     fmt: str | None = None
+    pixels: bool = True  # False (with `fmt`): return only the encoding, so a worker's pipe carries half as much
 
 
 @dataclass(frozen=True)
 class Rendered:
-    """An image (H, W) uint8 whose top-left pixel is sensor pixel `roi_xy`, and its encoding if asked for."""
+    """An image (H, W) uint8 whose top-left pixel is sensor pixel `roi_xy` (None if the job asked only for the
+    encoding), and its encoding if asked for."""
 
-    image: np.ndarray
+    image: np.ndarray | None
     roi_xy: tuple[int, int]
     encoded: bytes | None = None
 
@@ -90,7 +92,8 @@ def render_job(renderer: ExposureRenderer, job: RenderJob) -> Rendered:
     encoded = None
     if job.fmt is not None:
         encoded = encode_image(frame.image, job.fmt)
-    return Rendered(frame.image, tuple(int(v) for v in frame.roi_xy), encoded)
+    image = frame.image if job.pixels or encoded is None else None
+    return Rendered(image, tuple(int(v) for v in frame.roi_xy), encoded)
 
 
 def _init_worker(renderer: ExposureRenderer) -> None:

@@ -4,6 +4,8 @@ for the renders (docs/frames.md, "Frames on the links")."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from device_helpers import CoreHost
@@ -147,6 +149,10 @@ def test_pool_workers_render_the_same_pixels_as_the_caller(kind: str) -> None:
             want = render_job(renderer, job)
             assert np.array_equal(rendered.image, want.image) and rendered.roi_xy == want.roi_xy
             assert rendered.encoded == want.encoded
+        only = replace(jobs[1], pixels=False)  # the ZeroMQ facade's jobs: the encoding alone crosses the pipe
+        with RenderPool(renderer, 1, kind) as pool:
+            bare = pool.submit(only).result(timeout=120)
+        assert bare.image is None and bare.encoded == got[1].encoded and bare.roi_xy == got[1].roi_xy
     finally:
         subject.close()
 

@@ -186,7 +186,8 @@ class FramePublisher:
             region = (win.x0, win.y0, win.width, win.height)
             if region not in futures:
                 futures[region] = self._pool.submit(RenderJob(job.frame_id, win.eye_id, job.rows, self.seed,
-                                                              region=region, eye_indices=eyes, fmt=job.fmt))
+                                                              region=region, eye_indices=eyes, fmt=job.fmt,
+                                                              pixels=False))
         return futures
 
     def _publish(self, job: FrameJob, futures: dict[tuple[int, int, int, int], Future]) -> None:
