@@ -28,6 +28,7 @@ import multiprocessing
 from collections.abc import Callable
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor, wait
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -96,14 +97,21 @@ def render_job(renderer: ExposureRenderer, job: RenderJob) -> Rendered:
     return Rendered(image, tuple(int(v) for v in frame.roi_xy), encoded)
 
 
-def _init_worker(renderer: ExposureRenderer) -> None:
+def _init_worker(renderer: ExposureRenderer, setup: Callable[[], None] | None = None) -> None:
     global _WORKER_RENDERER
     _WORKER_RENDERER = renderer
+    if setup is not None:
+        setup()
 
 
 def _render_in_worker(job: RenderJob) -> Rendered:
     assert _WORKER_RENDERER is not None, "worker not initialised"
     return render_job(_WORKER_RENDERER, job)
+
+
+def _call_in_worker(fn: Callable[..., Any], args: tuple) -> Any:
+    assert _WORKER_RENDERER is not None, "worker not initialised"
+    return fn(_WORKER_RENDERER, *args)
 
 
 def _ready() -> bool:
@@ -114,15 +122,16 @@ class RenderPool:
     """See the module docstring; `close` (or `with`) stops the workers."""
 
     def __init__(self, renderer: ExposureRenderer, workers: int = 1, kind: str = "process",
-                 on_done: Callable[[], None] | None = None) -> None:
-        """Render with `renderer` in `workers` workers of `kind` (0: inline)."""
+                 on_done: Callable[[], None] | None = None, setup: Callable[[], None] | None = None) -> None:
+        """Render with `renderer` in `workers` workers of `kind` (0: inline); `setup` (picklable) runs once in
+        each worker process as it starts (e.g. to open the socket a `call` publishes on)."""
         if not 0 <= workers <= MAX_RENDER_WORKERS or kind not in KINDS:
             raise ValueError(f"render workers must be in 0..{MAX_RENDER_WORKERS} and kind one of {KINDS}")
         self.renderer, self.workers, self.kind, self.on_done = renderer, workers, kind, on_done
         self._executor: Executor | None = None
         if workers and kind == "process":
             self._executor = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                                                 initializer=_init_worker, initargs=(renderer,))
+                                                 initializer=_init_worker, initargs=(renderer, setup))
             warm = [self._executor.submit(_ready) for _ in range(workers)]  # start the workers now
             done, _ = wait(warm, timeout=START_TIMEOUT_S)
             if len(done) < workers or not all(f.result() for f in done):
@@ -141,6 +150,16 @@ class RenderPool:
             future = self._executor.submit(_render_in_worker, job)
         else:
             future = self._executor.submit(render_job, self.renderer, job)
+        if self.on_done is not None:
+            future.add_done_callback(lambda _: self.on_done())
+        return future
+
+    def call(self, fn: Callable[..., Any], *args: Any) -> Future:
+        """The future of `fn(renderer, *args)` in a worker process (`fn` and `args` picklable); only for
+        ``kind="process"`` with workers."""
+        if self._executor is None or self.kind != "process":
+            raise ValueError("RenderPool.call needs worker processes")
+        future = self._executor.submit(_call_in_worker, fn, args)
         if self.on_done is not None:
             future.add_done_callback(lambda _: self.on_done())
         return future

@@ -13,7 +13,12 @@ gaps. The core thread `offer`s; the frame thread ("eyehil-zmq-frames") hands the
 `render_pool.RenderPool` and publishes the images, in exposure order, on its own PUB. With ``workers=0`` the
 frame thread renders them itself, sharing the interpreter lock with the thread that publishes the pupil
 datums; with ``workers`` >= 1 they are rendered (and encoded) in that many processes (``kind="process"``) or
-pool threads (``kind="thread"``), so the datums' thread is not held up. Capacity: at most `QUEUE` exposures
+pool threads (``kind="thread"``), so the datums' thread is not held up. Render processes given the backbone's
+TCP endpoint (`tcp_endpoint`, the XSUB that clients publish to) publish their images themselves on a PUB of
+their own (`connect_worker`, `publish_in_worker`): only the job (about 3 kB of channels) crosses the pipe and
+a count comes back, so neither the image bytes nor their packing touch this process's interpreter lock. One
+process publishes in exposure order; with several, images of neighbouring exposures can arrive out of order
+(their `index` tells). Capacity: at most `QUEUE` exposures
 wait for the frame thread and `ahead` render in the pool; an exposure offered to a full queue is dropped
 (`dropped` counts images, as it counts images whose rendering failed), so rendering never delays the datums.
 `ImageThread` is the simpler bounded thread of the world view (`pupil/world.py`): at most `QUEUE` jobs wait, a
@@ -22,12 +27,14 @@ job offered to a full queue is dropped and counted, and the thread draws each it
 
 from __future__ import annotations
 
+import atexit
 import logging
 import queue
 import threading
 from collections import deque
 from concurrent.futures import Future
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 import zmq
@@ -35,7 +42,7 @@ import zmq
 from eyehil.emulator.device.appearance import closed
 from eyehil.emulator.device.frames import ExposureRenderer
 from eyehil.emulator.device.pupil.datums import EyeWindow
-from eyehil.emulator.device.render_pool import RenderJob, RenderPool, encode_image
+from eyehil.emulator.device.render_pool import RenderJob, RenderPool, encode_image, render_job
 from eyehil.protocols.pupil import frame_datum, pack
 
 # encode_image lives in render_pool (workers encode)
@@ -117,13 +124,42 @@ class ImageThread:
                 break
 
 
+_WORKER_PUB: zmq.Socket | None = None  # a render process's own PUB to the backbone (`connect_worker`)
+
+
+def connect_worker(endpoint: str, hwm: int) -> None:
+    """In a render process, as it starts: its PUB, connected to the backbone's XSUB at `endpoint` (TCP)."""
+    global _WORKER_PUB
+    sock = zmq.Context.instance().socket(zmq.PUB)
+    sock.setsockopt(zmq.LINGER, 0)
+    sock.setsockopt(zmq.SNDHWM, hwm)
+    sock.connect(endpoint)
+    _WORKER_PUB = sock
+    atexit.register(sock.close, 0)
+
+
+def publish_in_worker(renderer: ExposureRenderer, job: RenderJob, heads: tuple[tuple[int, int], ...],
+                      timestamp: float) -> int:
+    """In a render process: render and encode `job`, then publish it on the process's PUB once per (eye id,
+    index) of `heads` (the eyes whose window it is); the number of messages sent."""
+    assert _WORKER_PUB is not None, "render process not connected"
+    encoded = render_job(renderer, job).encoded
+    _, _, width, height = job.region
+    for eye_id, index in heads:
+        _WORKER_PUB.send_multipart(pack(frame_datum(eye_id, index, timestamp, width, height, job.fmt, encoded)),
+                                   copy=False)
+    return len(heads)
+
+
 class FramePublisher:
     """Renders and publishes eye images; see the module docstring."""
 
     def __init__(self, context: zmq.Context, endpoint: str, renderer: ExposureRenderer, windows: list[EyeWindow],
-                 *, seed: int = 0, hwm: int = 1000, workers: int = 0, kind: str = "process") -> None:
+                 *, seed: int = 0, hwm: int = 1000, workers: int = 0, kind: str = "process",
+                 tcp_endpoint: str | None = None) -> None:
         """Publish to the backbone's XSUB at `endpoint`; render in `workers` processes or threads (`kind`; 0: on
-        the frame thread); call `start`, then `close`."""
+        the frame thread); render processes publish themselves to the XSUB's `tcp_endpoint` when it is given
+        (module docstring); call `start`, then `close`."""
         self.renderer, self.windows, self.seed = renderer, windows, seed
         self.dropped = self.published = 0
         self._counts = [0] * len(windows)
@@ -137,7 +173,9 @@ class FramePublisher:
         self._pub.setsockopt(zmq.SNDHWM, hwm)
         self._pub.connect(endpoint)
         self._pending: deque[tuple[FrameJob, dict[tuple[int, int, int, int], Future]]] = deque()
-        self._pool = RenderPool(renderer, workers, kind, on_done=self._event.set)
+        self._direct = bool(workers) and kind == "process" and tcp_endpoint is not None
+        setup = partial(connect_worker, tcp_endpoint, hwm) if self._direct else None
+        self._pool = RenderPool(renderer, workers, kind, on_done=self._event.set, setup=setup)
         self._thread = threading.Thread(target=self._run, name="eyehil-zmq-frames", daemon=True)
 
     def start(self) -> None:
@@ -184,14 +222,29 @@ class FramePublisher:
         futures: dict[tuple[int, int, int, int], Future] = {}
         for win in self.windows:
             region = (win.x0, win.y0, win.width, win.height)
-            if region not in futures:
-                futures[region] = self._pool.submit(RenderJob(job.frame_id, win.eye_id, job.rows, self.seed,
-                                                              region=region, eye_indices=eyes, fmt=job.fmt,
-                                                              pixels=False))
+            if region in futures:
+                continue
+            render = RenderJob(job.frame_id, win.eye_id, job.rows, self.seed, region=region, eye_indices=eyes,
+                               fmt=job.fmt, pixels=False)
+            if self._direct:
+                heads = tuple((w.eye_id, index) for w, index in zip(self.windows, job.indices, strict=True)
+                              if (w.x0, w.y0, w.width, w.height) == region)
+                futures[region] = self._pool.call(publish_in_worker, render, heads, job.timestamp)
+            else:
+                futures[region] = self._pool.submit(render)
         return futures
 
     def _publish(self, job: FrameJob, futures: dict[tuple[int, int, int, int], Future]) -> None:
-        """Send one message per eye of a rendered job (an image whose rendering failed is dropped, counted)."""
+        """Send one message per eye of a rendered job (an image whose rendering failed is dropped, counted);
+        with render processes that publish themselves, count what they sent."""
+        if self._direct:
+            for region, future in futures.items():
+                try:
+                    self.published += future.result()
+                except Exception:
+                    logging.getLogger(__name__).exception("frame %d not rendered", job.frame_id)
+                    self.dropped += sum((w.x0, w.y0, w.width, w.height) == region for w in self.windows)
+            return
         for win, index in zip(self.windows, job.indices, strict=True):
             future = futures[(win.x0, win.y0, win.width, win.height)]
             try:

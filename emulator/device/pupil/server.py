@@ -166,8 +166,10 @@ class PupilServer:
         windows = eye_windows(solver, eye_ids, o.frame_size)
         frames = None
         if o.frame_rate_hz > 0:
+            local = "127.0.0.1" if o.host in ("", "*", "0.0.0.0") else o.host  # render processes connect here
             frames = FramePublisher(self.context, xsub, ExposureRenderer.for_subject(self.subject), windows,
-                                    seed=o.seed, hwm=o.hwm, workers=o.render_workers, kind=o.render_kind)
+                                    seed=o.seed, hwm=o.hwm, workers=o.render_workers, kind=o.render_kind,
+                                    tcp_endpoint=f"tcp://{local}:{self.pub_port}")
             self._parts.append(frames)
         world = None
         if o.world_rate_hz > 0:
