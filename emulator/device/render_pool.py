@@ -100,6 +100,10 @@ def render_job(renderer: ExposureRenderer, job: RenderJob) -> Rendered:
 def _init_worker(renderer: ExposureRenderer, setup: Callable[[], None] | None = None) -> None:
     global _WORKER_RENDERER
     _WORKER_RENDERER = renderer
+    # One OpenCV thread: the pool is the parallelism. OpenCV's own pool (one thread per core) made each small
+    # blur wake threads that fought the device's process for the two cores: 640 x 480 frames over ZeroMQ went
+    # from 127-142 to 193-197 of 200 per second (python -m bench zmq, idle, 2 cores).
+    cv2.setNumThreads(1)
     if setup is not None:
         setup()
 
