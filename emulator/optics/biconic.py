@@ -51,6 +51,26 @@ def rotation_matrix(axis_deg: np.ndarray, tilt_h_deg: np.ndarray, tilt_v_deg: np
     return ry @ rx @ rz
 
 
+def guide_roots(c: np.ndarray, k: np.ndarray, p: tuple[np.ndarray, ...], u: tuple[np.ndarray, ...]):
+    """(near, far) positive t of the ray p + t u (surface frame, component arrays) on the quadric of revolution
+    of vertex curvature c and 1 + Q = k, x^2 + y^2 + k w^2 - 2 w / c = 0 (w = -z), and whether there is any."""
+    px, py, pz = p
+    ux, uy, uz = u
+    # multiplied by c: c (x^2 + y^2) + c k w^2 - 2 w, with w = -(pz + t uz)
+    a = c * (ux * ux + uy * uy + k * uz * uz)
+    b = 2.0 * (c * (px * ux + py * uy + k * pz * uz) + uz)
+    cc = c * (px * px + py * py + k * pz * pz) + 2.0 * pz
+    disc = b * b - 4.0 * a * cc
+    sq = np.sqrt(np.maximum(disc, 0.0))
+    q = -0.5 * (b + np.where(b >= 0, sq, -sq))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r1, r2 = q / a, cc / q
+    lo, hi = np.minimum(r1, r2), np.maximum(r1, r2)
+    near = np.where(lo > EPS_T, lo, hi)
+    ok = (disc >= 0) & np.isfinite(near) & (near > EPS_T)
+    return near, np.where(np.isfinite(hi), hi, near), ok
+
+
 @dataclass(frozen=True, eq=False)
 class Biconic:
     """A biconic cap (see the module docstring): apex `vertex` (..., 3), axes `rotation` (..., 3, 3),
@@ -178,22 +198,8 @@ class Biconic:
 
     def _guide_roots(self, ray: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(near, far) positive roots of the mean quadric x^2 + y^2 + k w^2 - 2 R w = 0 (w = -z) and whether any."""
-        px, py, pz, ux, uy, uz = ray
         c = 0.5 * (1.0 / self.radius_x + 1.0 / self.radius_y)
-        k = 1.0 + 0.5 * (self.conic_x + self.conic_y)
-        # multiplied by c: c (x^2 + y^2) + c k w^2 - 2 w, with w = -(pz + t uz)
-        a = c * (ux * ux + uy * uy + k * uz * uz)
-        b = 2.0 * (c * (px * ux + py * uy + k * pz * uz) + uz)
-        cc = c * (px * px + py * py + k * pz * pz) + 2.0 * pz
-        disc = b * b - 4.0 * a * cc
-        sq = np.sqrt(np.maximum(disc, 0.0))
-        q = -0.5 * (b + np.where(b >= 0, sq, -sq))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            r1, r2 = q / a, cc / q
-        lo, hi = np.minimum(r1, r2), np.maximum(r1, r2)
-        near = np.where(lo > EPS_T, lo, hi)
-        ok = (disc >= 0) & np.isfinite(near) & (near > EPS_T)
-        return near, np.where(np.isfinite(hi), hi, near), ok
+        return guide_roots(c, 1.0 + 0.5 * (self.conic_x + self.conic_y), ray[:3], ray[3:])
 
     def _refine(self, ray: tuple[np.ndarray, ...], t: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Newton on f(t) = -z'(t) - s(x'(t), y'(t)) from the guide root t (module docstring)."""

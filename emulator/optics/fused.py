@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from eyehil.emulator.optics.biconic import MAX_NEWTON, SURFACE_TOLERANCE_MM, Biconic
+from eyehil.emulator.optics.biconic import MAX_NEWTON, SURFACE_TOLERANCE_MM, Biconic, guide_roots
 from eyehil.emulator.optics.conic import EPS_T, Conic, Plane
 
 Vec = tuple[np.ndarray, np.ndarray, np.ndarray]
@@ -198,25 +198,6 @@ def _biconic_hit(pair: BiconicPair, p: Vec, u: Vec, t: np.ndarray, ok: np.ndarra
     return t, ok & inside & (np.abs(f) <= SURFACE_TOLERANCE_MM) & (t > EPS_T), sx, sy
 
 
-def _guide(pair: BiconicPair, p: Vec, u: Vec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """`Biconic._guide_roots` in the posterior's frame: (near, far, any)."""
-    px, py, pz = p
-    ux, uy, uz = u
-    c, k = pair.guide
-    a = c * (ux * ux + uy * uy + k * uz * uz)
-    b = 2.0 * (c * (px * ux + py * uy + k * pz * uz) + uz)
-    cc = c * (px * px + py * py + k * pz * pz) + 2.0 * pz
-    disc = b * b - 4.0 * a * cc
-    sq = np.sqrt(np.maximum(disc, 0.0))
-    q = -0.5 * (b + np.where(b >= 0, sq, -sq))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r1, r2 = q / a, cc / q
-    lo, hi = np.minimum(r1, r2), np.maximum(r1, r2)
-    near = np.where(lo > EPS_T, lo, hi)
-    ok = (disc >= 0) & np.isfinite(near) & (near > EPS_T)
-    return near, np.where(np.isfinite(hi), hi, near), ok
-
-
 def _posterior_hit(pair: BiconicPair, p: Vec, u: Vec, start: np.ndarray | None):
     """`Biconic.intersect` in the posterior's frame: (t (NaN where there is no hit), hit, s_x, s_y at the hit).
 
@@ -224,7 +205,7 @@ def _posterior_hit(pair: BiconicPair, p: Vec, u: Vec, start: np.ndarray | None):
     the cap. Warm (`start` finite, a neighbouring ray's t): Newton from there, and the cold way where that
     fails."""
     if start is None:
-        near, far, any_root = _guide(pair, p, u)
+        near, far, any_root = guide_roots(*pair.guide, p, u)
         t, hit, sx, sy = _biconic_hit(pair, p, u, near, any_root)
         retry = ~hit & any_root
         if retry.any():
