@@ -22,6 +22,7 @@ def test_iohub_calibrates_and_records_binocular_gaze() -> None:
         scene = srv.subject.solver.scene
         script = Script("iohub_gazepoint.py", srv.port, RECORD_S)
         result = json.loads(script.line("CALIBRATION"))
+        assert isinstance(result, dict), (result, srv.all_counters(), script.tail())  # an int: an ioHub error code
         points = [(result[f"CALX{k}"], result[f"CALY{k}"]) for k in range(1, 10)]
         assert len(points) == 9 and int(result["SUMMARY"]["VALID_POINTS"]) == 9
         for k, target in enumerate(points, 1):
