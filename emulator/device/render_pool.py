@@ -151,19 +151,18 @@ class RenderPool:
             future.set_result(render_job(self.renderer, job))
             return future
         if self.kind == "process":
-            future = self._executor.submit(_render_in_worker, job)
-        else:
-            future = self._executor.submit(render_job, self.renderer, job)
-        if self.on_done is not None:
-            future.add_done_callback(lambda _: self.on_done())
-        return future
+            return self._watched(self._executor.submit(_render_in_worker, job))
+        return self._watched(self._executor.submit(render_job, self.renderer, job))
 
     def call(self, fn: Callable[..., Any], *args: Any) -> Future:
         """The future of `fn(renderer, *args)` in a worker process (`fn` and `args` picklable); only for
         ``kind="process"`` with workers."""
         if self._executor is None or self.kind != "process":
             raise ValueError("RenderPool.call needs worker processes")
-        future = self._executor.submit(_call_in_worker, fn, args)
+        return self._watched(self._executor.submit(_call_in_worker, fn, args))
+
+    def _watched(self, future: Future) -> Future:
+        """`future`, with `on_done` called when it finishes."""
         if self.on_done is not None:
             future.add_done_callback(lambda _: self.on_done())
         return future

@@ -51,6 +51,21 @@ def rotation_matrix(axis_deg: np.ndarray, tilt_h_deg: np.ndarray, tilt_v_deg: np
     return ry @ rx @ rz
 
 
+def sag(cx: np.ndarray, cy: np.ndarray, kx: np.ndarray, ky: np.ndarray, x: np.ndarray, y: np.ndarray,
+        gradient: bool = True) -> tuple[np.ndarray, ...]:
+    """The sag s of the module docstring at surface coordinates (x, y), the argument of its root (> 0 where the
+    sag exists) and, if `gradient`, its slopes s_x, s_y; per principal meridian c = 1 / R and k = (1 + Q) c^2."""
+    x2, y2 = x * x, y * y
+    s_num = cx * x2 + cy * y2
+    disc = 1.0 - kx * x2 - ky * y2
+    d = np.sqrt(np.maximum(disc, 1e-300))
+    one_d = 1.0 + d
+    if not gradient:
+        return s_num / one_d, disc
+    common = s_num / (d * one_d * one_d)
+    return s_num / one_d, disc, x * (2.0 * cx / one_d + common * kx), y * (2.0 * cy / one_d + common * ky)
+
+
 def guide_roots(c: np.ndarray, k: np.ndarray, p: tuple[np.ndarray, ...], u: tuple[np.ndarray, ...]):
     """(near, far) positive t of the ray p + t u (surface frame, component arrays) on the quadric of revolution
     of vertex curvature c and 1 + Q = k, x^2 + y^2 + k w^2 - 2 w / c = 0 (w = -z), and whether there is any."""
@@ -124,19 +139,10 @@ class Biconic:
     def _sag(self, x: np.ndarray, y: np.ndarray, gradient: bool = False, check: bool = True):
         """Sag s (and whether it exists, unless `check` is False; and its gradient s_x, s_y if `gradient`)."""
         cx, cy = 1.0 / self.radius_x, 1.0 / self.radius_y
-        x2, y2 = x * x, y * y
-        s_num = cx * x2 + cy * y2
-        disc = 1.0 - ((1.0 + self.conic_x) * cx * cx) * x2 - ((1.0 + self.conic_y) * cy * cy) * y2
-        valid = ((disc > 0) & (x2 + y2 <= self.aperture**2)) if check else None
-        d = np.sqrt(np.maximum(disc, 1e-300))
-        one_d = 1.0 + d
-        s = s_num / one_d
-        if not gradient:
-            return s, valid
-        common = s_num / (d * one_d * one_d)
-        sx = x * (2.0 * cx / one_d + common * ((1.0 + self.conic_x) * cx * cx))
-        sy = y * (2.0 * cy / one_d + common * ((1.0 + self.conic_y) * cy * cy))
-        return s, valid, sx, sy
+        s, disc, *slopes = sag(cx, cy, (1.0 + self.conic_x) * cx * cx, (1.0 + self.conic_y) * cy * cy, x, y,
+                               gradient)
+        valid = ((disc > 0) & (x * x + y * y <= self.aperture**2)) if check else None
+        return (s, valid, *slopes)
 
     def mean_radius(self) -> np.ndarray:
         """Radius of the mean vertex curvature, 2 / (1/R_x + 1/R_y) (mm)."""

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from eyehil.emulator.optics.biconic import MAX_NEWTON, SURFACE_TOLERANCE_MM, Biconic, guide_roots
+from eyehil.emulator.optics.biconic import MAX_NEWTON, SURFACE_TOLERANCE_MM, Biconic, guide_roots, sag
 from eyehil.emulator.optics.conic import EPS_T, Conic, Plane
 
 Vec = tuple[np.ndarray, np.ndarray, np.ndarray]
@@ -163,18 +163,6 @@ class BiconicPair:
                                        self.plane_d, self.back_x, self.back_y, self.back_v)))
 
 
-def _biconic_sag(f: tuple[np.ndarray, ...], x: np.ndarray, y: np.ndarray):
-    """`Biconic._sag` with gradient from the fields `f` of `BiconicPair.front`/`back`: (s, disc, s_x, s_y)."""
-    cx, cy, kx, ky, _ = f
-    x2, y2 = x * x, y * y
-    s_num = cx * x2 + cy * y2
-    disc = 1.0 - kx * x2 - ky * y2
-    d = np.sqrt(np.maximum(disc, 1e-300))
-    one_d = 1.0 + d
-    common = s_num / (d * one_d * one_d)
-    return s_num / one_d, disc, x * (2.0 * cx / one_d + common * kx), y * (2.0 * cy / one_d + common * ky)
-
-
 def _biconic_hit(pair: BiconicPair, p: Vec, u: Vec, t: np.ndarray, ok: np.ndarray):
     """`Biconic._refine` in the posterior's frame from the root t: (t, hit, s_x, s_y at the hit).
 
@@ -186,7 +174,7 @@ def _biconic_hit(pair: BiconicPair, p: Vec, u: Vec, t: np.ndarray, ok: np.ndarra
     t = np.where(ok, t, 0.0)
     for _ in range(MAX_NEWTON):
         x, y = px + t * ux, py + t * uy
-        s, disc, sx, sy = _biconic_sag(pair.back, x, y)
+        s, disc, sx, sy = sag(*pair.back[:4], x, y)
         f = -(pz + t * uz) - s
         with np.errstate(divide="ignore", invalid="ignore"):
             dt = np.where(ok, f / (-uz - sx * ux - sy * uy), 0.0)
@@ -207,23 +195,27 @@ def _posterior_hit(pair: BiconicPair, p: Vec, u: Vec, start: np.ndarray | None):
     if start is None:
         near, far, any_root = guide_roots(*pair.guide, p, u)
         t, hit, sx, sy = _biconic_hit(pair, p, u, near, any_root)
-        retry = ~hit & any_root
-        if retry.any():
-            i = np.nonzero(retry)
+        i = np.nonzero(~hit & any_root)
+        if i[0].size:
             t2, hit2, sx2, sy2 = _biconic_hit(pair.take(i), tuple(v[i] for v in p), tuple(v[i] for v in u), far[i],
                                               np.ones(i[0].size, dtype=bool))
-            t, hit, sx, sy = t.copy(), hit.copy(), sx.copy(), sy.copy()
-            t[i], hit[i], sx[i], sy[i] = np.where(hit2, t2, t[i]), hit2, sx2, sy2
+            t, hit, sx, sy = _put((t, hit, sx, sy), i, (np.where(hit2, t2, t[i]), hit2, sx2, sy2))
         return np.where(hit, t, np.nan), hit, sx, sy
     warm = np.isfinite(start)
     t, hit, sx, sy = _biconic_hit(pair, p, u, np.where(warm, start, 0.0), warm)
-    cold = ~hit
-    if cold.any():
-        i = np.nonzero(cold)
-        t2, hit2, sx2, sy2 = _posterior_hit(pair.take(i), tuple(v[i] for v in p), tuple(v[i] for v in u), None)
-        t, hit, sx, sy = t.copy(), hit.copy(), sx.copy(), sy.copy()
-        t[i], hit[i], sx[i], sy[i] = t2, hit2, sx2, sy2
+    i = np.nonzero(~hit)
+    if i[0].size:
+        part = _posterior_hit(pair.take(i), tuple(v[i] for v in p), tuple(v[i] for v in u), None)
+        t, hit, sx, sy = _put((t, hit, sx, sy), i, part)
     return np.where(hit, t, np.nan), hit, sx, sy
+
+
+def _put(arrays: tuple[np.ndarray, ...], index: tuple[np.ndarray, ...], parts: tuple[np.ndarray, ...]):
+    """Copies of `arrays` with `parts` written at `index`."""
+    out = tuple(a.copy() for a in arrays)
+    for a, part in zip(out, parts, strict=True):
+        a[index] = part
+    return out
 
 
 def trace_biconic(pair: BiconicPair, eta1: np.ndarray, eta2: np.ndarray, qx: np.ndarray, qy: np.ndarray,
@@ -233,7 +225,7 @@ def trace_biconic(pair: BiconicPair, eta1: np.ndarray, eta2: np.ndarray, qx: np.
     `_posterior_hit`).
 
     `source` is given in the ANTERIOR surface's frame; q = (qx, qy) are the anterior surface coordinates."""
-    s, disc, sx, sy = _biconic_sag(pair.front, qx, qy)
+    s, disc, sx, sy = sag(*pair.front[:4], qx, qy)
     ok = (disc > 0) & (qx * qx + qy * qy <= pair.front[4])
     norm = np.sqrt(sx * sx + sy * sy + 1.0)
     na = (sx / norm, sy / norm, 1.0 / norm)

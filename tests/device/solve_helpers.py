@@ -46,5 +46,5 @@ class HeldSolver(FeatureSolver):
             while not os.path.exists(self.release):
                 if time.monotonic() > deadline:
                     raise RuntimeError("never released")
-                time.sleep(0.005)
+                time.sleep(0.005)  # a file another process writes: no event to wait on across processes
         return closed_form(xy, self.n_eyes, self.n_channels)

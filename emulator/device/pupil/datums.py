@@ -72,6 +72,11 @@ class EyeWindow:
     height: int
 
     @property
+    def region(self) -> tuple[int, int, int, int]:
+        """(x0, y0, w, h) px, full sensor: what the renderer draws (`render_pool.RenderJob.region`)."""
+        return self.x0, self.y0, self.width, self.height
+
+    @property
     def origin(self) -> np.ndarray:
         """(x0, y0) px, full sensor."""
         return np.array([self.x0, self.y0], dtype=float)

@@ -173,6 +173,9 @@ class FramePublisher:
         self._pub.setsockopt(zmq.SNDHWM, hwm)
         self._pub.connect(endpoint)
         self._pending: deque[tuple[FrameJob, dict[tuple[int, int, int, int], Future]]] = deque()
+        self._regions: dict[tuple[int, int, int, int], list[int]] = {}  # window -> the eyes (positions) it shows
+        for k, win in enumerate(windows):
+            self._regions.setdefault(win.region, []).append(k)
         self._direct = bool(workers) and kind == "process" and tcp_endpoint is not None
         setup = partial(connect_worker, tcp_endpoint, hwm) if self._direct else None
         self._pool = RenderPool(renderer, workers, kind, on_done=self._event.set, setup=setup)
@@ -220,15 +223,11 @@ class FramePublisher:
         """Start rendering the job's distinct windows (eyes sharing a window share one rendering)."""
         eyes = tuple(range(len(job.rows)))
         futures: dict[tuple[int, int, int, int], Future] = {}
-        for win in self.windows:
-            region = (win.x0, win.y0, win.width, win.height)
-            if region in futures:
-                continue
-            render = RenderJob(job.frame_id, win.eye_id, job.rows, self.seed, region=region, eye_indices=eyes,
-                               fmt=job.fmt, pixels=False)
+        for region, members in self._regions.items():
+            render = RenderJob(job.frame_id, self.windows[members[0]].eye_id, job.rows, self.seed, region=region,
+                               eye_indices=eyes, fmt=job.fmt, pixels=False)
             if self._direct:
-                heads = tuple((w.eye_id, index) for w, index in zip(self.windows, job.indices, strict=True)
-                              if (w.x0, w.y0, w.width, w.height) == region)
+                heads = tuple((self.windows[k].eye_id, job.indices[k]) for k in members)
                 futures[region] = self._pool.call(publish_in_worker, render, heads, job.timestamp)
             else:
                 futures[region] = self._pool.submit(render)
@@ -243,10 +242,10 @@ class FramePublisher:
                     self.published += future.result()
                 except Exception:
                     logging.getLogger(__name__).exception("frame %d not rendered", job.frame_id)
-                    self.dropped += sum((w.x0, w.y0, w.width, w.height) == region for w in self.windows)
+                    self.dropped += len(self._regions[region])
             return
         for win, index in zip(self.windows, job.indices, strict=True):
-            future = futures[(win.x0, win.y0, win.width, win.height)]
+            future = futures[win.region]
             try:
                 data = future.result().encoded
             except Exception:
