@@ -15,7 +15,7 @@ it is fixed to the eye. (gkaModelEye places the fovea by the nodal-point visual 
 difference is a fraction of a degree in alpha, which every gaze estimator calibrates away.)
 
 Fixation: find (azimuth, elevation) with Listing torsion so that the rotated line of sight passes
-through the target; a batched Gauss-Newton (`newton2d`) on the angular residual over all eyes x
+through the target; a batched quasi-Newton (Broyden, `secant2d`) on the angular residual over all eyes x
 targets, reported as the distance (mm) by which the line of sight misses the target.
 """
 
@@ -28,7 +28,7 @@ import numpy as np
 from eyehil.emulator.eye.media import Media
 from eyehil.emulator.eye.model import EyeModel
 from eyehil.emulator.eye.surfaces import cornea_optics, lens_surfaces, pupil_centre, retina
-from eyehil.emulator.optics.newton import newton2d
+from eyehil.emulator.optics.newton import secant2d
 from eyehil.emulator.optics.pupil import trace_into_eye
 from eyehil.emulator.optics.rays import _dot, distance_to_line, refract, unit
 
@@ -85,7 +85,7 @@ def line_of_sight(eye: EyeModel, media: Media) -> LineOfSight:
         p, ok = trace_into_eye(optics, q, direction=-outward)
         return p[..., :2] - stop[..., :2], ok
 
-    sol = newton2d(residual, stop[..., :2] - 3.0 * outward[..., :2], max_step=0.5)
+    sol = secant2d(residual, stop[..., :2] - 3.0 * outward[..., :2], max_step=0.5, subset=False)
     entry, _ = optics.anterior.point(sol.q)
     fovea, reached = _trace_to_retina(eye, media, optics, entry, -outward)
     valid = sol.ok & (np.linalg.norm(sol.residual, axis=-1) < 1e-6)
@@ -166,7 +166,7 @@ def solve_fixation(
     in_front = gaze[..., 2] > 0
     h0 = np.degrees(np.arctan2(gaze[..., 0], gaze[..., 2]) - np.arctan2(direction[..., 0], direction[..., 2]))
     v0 = np.degrees(np.arcsin(gaze[..., 1]) - np.arcsin(direction[..., 1]))
-    sol = newton2d(residual, np.stack([h0, v0], axis=-1), h=1e-6, tol=1e-10, max_step=10.0)
+    sol = secant2d(residual, np.stack([h0, v0], axis=-1), h=1e-6, tol=1e-10, max_step=10.0, subset=False)
     p, d = rotated(sol.q)
     miss = distance_to_line(targets, p, d)
     torsion = listing_torsion(sol.q[..., 0], sol.q[..., 1]) if listing else np.zeros(shape)

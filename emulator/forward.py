@@ -79,9 +79,11 @@ def simulate(
     media: Media | None = None,
     n_pupil_points: int = 30,
     progress: Callable[[int], None] | None = None,
+    pupil_solver: str = "secant",
 ) -> Features:
     """Features of `eyes` (a batch or one eye; anatomy as right eyes, `scene.sides` says which eyes the
-    subject uses) fixating `targets` (T, 3, scene frame mm; default the scene's grid) or held at `poses`."""
+    subject uses) fixating `targets` (T, 3, scene frame mm; default the scene's grid) or held at `poses`.
+    `pupil_solver`: `optics.pupil.solve_exit_points`' method ("secant", or the earlier "newton")."""
     if targets is not None and poses is not None:
         raise ValueError("give targets or poses, not both")
     eyes = eyes.as_batch()
@@ -102,7 +104,7 @@ def simulate(
             for s, side in enumerate(scene.sides):
                 place = Placement.of(heads, scene.apex(side))
                 result = _simulate_eyes(eyes[rows].with_laterality(side), scene, place, targets, poses, media,
-                                        n_pupil_points)
+                                        n_pupil_points, pupil_solver)
                 for name, value in result.items():
                     out.arrays[name][rows, s] = value
             if progress is not None:
@@ -134,7 +136,8 @@ def _poses(eye, place, los, centres, targets, poses) -> dict[str, np.ndarray]:
             "fixation_valid": ok & los.valid[:, None, None]}
 
 
-def _simulate_eyes(eye: EyeModel, scene: Scene, place: Placement, targets, poses, media, n_points) -> dict:
+def _simulate_eyes(eye: EyeModel, scene: Scene, place: Placement, targets, poses, media, n_points,
+                   pupil_solver: str = "secant") -> dict:
     los = line_of_sight(eye, media)
     centres = tuple(c[:, None, None, :] for c in eye_centres(eye))
     out = _poses(eye, place, los, centres, targets, poses)
@@ -157,7 +160,8 @@ def _simulate_eyes(eye: EyeModel, scene: Scene, place: Placement, targets, poses
         eccentricity, axis = stop_ellipse(eye)
         boundary = pupil_boundary(pupil_centre(eye)[..., :2], eye.pupil_radius, -eye.stop_depth, n_points,
                                   eccentricity=eccentricity, axis_deg=axis)
-    exits = solve_exit_points(optics, camera, boundary[:, None, None])
+    exits = solve_exit_points(optics, camera, boundary[:, None, None], centre=pupil_centre(eye)[:, None, None, None],
+                              solver=pupil_solver)
     out.update(_image_features(scene, to_scene, glints, exits))
     out.update(_ground_truth(eye, los, a, place, to_scene))
     return out

@@ -38,11 +38,13 @@ def test_batched_equals_the_per_eye_estimator_to_1e_6_deg(study) -> None:
         fit = estimator.calibrate(EyeSamples(s.pupil_px[i, 0], s.glints_px[i, 0], s.valid[i, 0]), targets)
         every = EyeSamples(s.pupil_px[i], s.glints_px[i], s.valid[i])
         reference = fit.errors_deg(every, targets)
-        # the study's results, H1 (central) and H2 (moved), to 1e-6 deg; single fixations to 1e-5 deg (the
-        # minimum is flat along R-K, where the two solvers' last steps differ by ~1e-5 mm)
+        # the study's results, H1 (central) and H2 (moved), to 1e-6 deg; single fixations to 2e-5 deg: the
+        # minimum is flat along R-K, where the two solvers' last steps differ by ~1e-5 mm. Measured on the code
+        # of 2026-12-02: moving every feature by 1e-10 px (random) moved the worst single fixation's difference
+        # between 5e-6 and 1.13e-5 deg over three draws; 1e-5 was the solvers' stopping noise, not a margin.
         assert abs(np.mean(errors[i, 0]) - np.mean(reference[0])) <= 1e-6
         assert abs(np.nanmean(errors[i, 1:]) - np.nanmean(reference[1:])) <= 1e-6
-        np.testing.assert_allclose(errors[i], reference, atol=1e-5)
+        np.testing.assert_allclose(errors[i], reference, atol=2e-5)
         assert batch.cost[i] <= fit.cost * (1 + 1e-9)
 
 

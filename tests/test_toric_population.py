@@ -99,9 +99,17 @@ def _scene_as_of_2d493f9(name: str) -> Scene:
     return dataclasses.replace(scene, camera=old)
 
 
-def test_symmetric_eyes_give_bit_for_bit_the_published_models_features() -> None:
-    """Against features stored by the implementation before issue 13 (commit 2d493f9), and batched with
-    astigmatic eyes (they are traced in chunks of their own)."""
+#: how far the features may move from the stored reference: the solvers' own convergence (the glint, pupil and
+#: fixation solves stop within 1e-11 mm of their solution; since 2026-12-03 by Broyden's method, which stops at a
+#: different point of that neighbourhood than the Newton iteration that made the reference). The pupil's angle is
+#: ill-conditioned for near-circular outlines and gets its own bound.
+REFERENCE_ATOL = {"_px": 1e-8, "_deg": 1e-7, "pupil_angle_deg": 1e-6}
+REFERENCE_ATOL_MM = 1e-9  # positions and unit vectors
+
+
+def test_symmetric_eyes_give_the_published_models_features() -> None:
+    """Against features stored by the implementation before issue 13 (commit 2d493f9), to the solvers' tolerance;
+    and batched with astigmatic eyes (traced in chunks of their own), bit for bit the same eyes traced alone."""
     ref = np.load(REFERENCE)
     eyes = published_eyes()
     toric = full_anatomy(eyes[:3], np.random.default_rng(2))
@@ -109,10 +117,15 @@ def test_symmetric_eyes_give_bit_for_bit_the_published_models_features() -> None
         idx = ref[f"{scene}:eyes"]
         mixed = EyeModel.stack([toric[:1], eyes[idx], toric[1:]])
         f = simulate(mixed, _scene_as_of_2d493f9(scene))
+        alone = simulate(eyes[idx], _scene_as_of_2d493f9(scene))
         for key in ref.files:
             if key.startswith(scene) and not key.endswith(":eyes"):
                 name = key.split(":")[1]
-                assert np.array_equal(f.arrays[name][1:1 + len(idx)], ref[key], equal_nan=True), key
+                got = f.arrays[name][1:1 + len(idx)]
+                assert np.array_equal(got, alone.arrays[name], equal_nan=True), key
+                atol = REFERENCE_ATOL.get(name, next((v for k, v in REFERENCE_ATOL.items() if name.endswith(k)),
+                                                     REFERENCE_ATOL_MM))
+                np.testing.assert_allclose(got, ref[key], rtol=0, atol=atol, err_msg=key)
 
 
 @pytest.mark.parametrize("preset", ["guestrin2006", "blignaut2014"])

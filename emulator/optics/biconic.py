@@ -202,6 +202,13 @@ class Biconic:
             t, valid = np.where(use, t2, t), valid | use
         return np.where(valid, t, np.nan), valid
 
+    def guide_intersect(self, p: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The ray p + t u (eye-local) on the guide quadric alone (mean curvature and mean k, no cap): (nearest
+        t > 0, whether there is one). Within a few micrometres of `intersect` for corneal toricity, at a fraction
+        of its cost: a starting point, not a surface point."""
+        t, _, ok = self._guide_roots(self._to_surface(p) + self._to_surface(u, point=False))
+        return np.where(ok, t, np.nan), ok
+
     def _guide_roots(self, ray: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(near, far) positive roots of the mean quadric x^2 + y^2 + k w^2 - 2 R w = 0 (w = -z) and whether any."""
         c = 0.5 * (1.0 / self.radius_x + 1.0 / self.radius_y)

@@ -1,6 +1,6 @@
 """Component-wise (x, y, z as separate arrays) ray traces through the cornea, conic or biconic.
 
-The pupil solve traces about 16 rays per boundary point (a forward-difference Newton, `newton2d`), so
+The pupil solve traces about 8 rays per boundary point (Broyden's method, `newton.secant2d`), so
 `trace_into_eye` is the forward model's hot loop. This module traces the same ray on separate coordinate
 arrays: no stacking into (..., 3), no einsum or `np.linalg.norm` per step, no intersection point built only
 to test it.

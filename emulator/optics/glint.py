@@ -3,10 +3,10 @@
 In the eye-local frame (the unrotated eye frame; the cornea a conic about z or a `Biconic`) the glint G of an LED
 at L seen by a camera whose nodal point is O satisfies the law of reflection: the surface normal at G
 bisects the unit directions from G to L and from G to O. Unknowns: (x, y) of G, with z on the
-surface; residual n(G) - unit(unit(L - G) + unit(O - G)) (its x, y parts); a few Newton steps from
-the glint of the osculating sphere. (For a biconic the unknowns are the surface coordinates (x', y')
-of `Biconic.point`; the residual is still the eye-local x, y parts, which vanish together with the
-z part on the cap.) Accuracy is reported as the distance (mm) by which the
+surface; residual n(G) - unit(unit(L - G) + unit(O - G)) (its x, y parts); a few quasi-Newton steps
+(Broyden, `secant2d`) from the glint of the osculating sphere. (For a biconic the unknowns are the
+surface coordinates (x', y') of `Biconic.point`; the residual is still the eye-local x, y parts, which
+vanish together with the z part on the cap.) Accuracy is reported as the distance (mm) by which the
 reflected ray misses O (the published study required 1e-4 mm).
 
 A glint is invalid when it falls off the cornea (beyond the limbus / aperture) or the surface there
@@ -24,7 +24,7 @@ import numpy as np
 
 from eyehil.emulator.optics.biconic import Biconic
 from eyehil.emulator.optics.conic import Conic
-from eyehil.emulator.optics.newton import newton2d
+from eyehil.emulator.optics.newton import secant2d
 from eyehil.emulator.optics.rays import _dot, distance_to_line, reflect, unit
 
 GLINT_TOLERANCE_MM = 1e-4
@@ -51,7 +51,7 @@ def solve_glints(cornea: Conic | Biconic, led: np.ndarray, camera: np.ndarray) -
 
     centre, radius = cornea.osculating_sphere()
     start = centre + radius[..., None] * unit(unit(led - centre) + unit(camera - centre))
-    sol = newton2d(residual, cornea.coords(start), max_step=0.5)
+    sol = secant2d(residual, cornea.coords(start), max_step=0.5, subset=False)
     g, exists = cornea.point(sol.q)
     n = cornea.normal(g)
     miss = distance_to_line(camera, g, reflect(unit(g - led), n))
