@@ -6,7 +6,7 @@ points traced.
 
 Cases, measured in turn within each repeat so that they share the machine's load:
 - `previous`: one process, the pupil solve by the forward-difference Newton (`pupil_solver="newton"`, the
-  implementation before 2026-12-03);
+  implementation before commit 9e352ca);
 - `one core`: one process, the current implementation (Broyden's method seeded by the pupil centre);
 - `two cores`: the current implementation on a warm pool of 2 worker processes (`eyehil.parallel.worker_pool`,
   started and warmed up before the clock starts), each scene's eyes split in two; the features are sent back

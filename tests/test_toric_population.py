@@ -100,7 +100,7 @@ def _scene_as_of_2d493f9(name: str) -> Scene:
 
 
 #: how far the features may move from the stored reference: the solvers' own convergence (the glint, pupil and
-#: fixation solves stop within 1e-11 mm of their solution; since 2026-12-03 by Broyden's method, which stops at a
+#: fixation solves stop within 1e-11 mm of their solution; since 9e352ca by Broyden's method, which stops at a
 #: different point of that neighbourhood than the Newton iteration that made the reference). The pupil's angle is
 #: ill-conditioned for near-circular outlines and gets its own bound.
 REFERENCE_ATOL = {"_px": 1e-8, "_deg": 1e-7, "pupil_angle_deg": 1e-6}

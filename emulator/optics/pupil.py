@@ -85,7 +85,7 @@ def solve_exit_points(
     `target` (the outline's points along target's axis -2, where centre has size 1), the centre's exit point is
     solved first, and its Jacobian starts the secant iteration of every point of its outline, saving the
     forward differences of the first step. `solver="newton"` is the forward-difference Newton (`newton2d`, three
-    traces per iteration; the method before 2026-12-03), kept as the reference the tests and the forward
+    traces per iteration; the method before commit 9e352ca), kept as the reference the tests and the forward
     benchmark compare with. Both stop within 1e-11 mm of the solution."""
     if solver not in SOLVERS:
         raise ValueError(f"unknown pupil solver {solver!r}; choose one of {', '.join(SOLVERS)}")
