@@ -115,6 +115,32 @@ def test_dask_scheduler_runs_the_same_work() -> None:
     assert out == [4, 9]
 
 
+def _malloc_tuned(_chunk) -> bool:
+    from eyehil import parallel
+
+    return parallel._malloc_tuned
+
+
+def test_every_chunk_runs_after_the_malloc_thresholds_are_fixed(monkeypatch) -> None:
+    """Dask's nanny starts workers with MALLOC_TRIM_THRESHOLD_=65536, which made the forward model 3x slower in
+    them (docs/benchmarks.md); chunks run after `tune_malloc` in this process, on the local pool and on Dask."""
+    import platform
+
+    from eyehil import parallel
+
+    if platform.libc_ver()[0] != "glibc":
+        pytest.skip("malloc thresholds are glibc's; this C library is not glibc")
+    assert parallel.tune_malloc()
+    monkeypatch.setattr(parallel, "_malloc_tuned", False)
+    assert run_chunks(_malloc_tuned, [0], sizes=[1], workers=1) == [True]
+    monkeypatch.setattr(parallel, "_malloc_tuned", False)  # the pool's forked workers start untuned
+    assert run_chunks(_malloc_tuned, [0, 1], sizes=[1, 1], workers=2) == [True, True]
+    distributed = pytest.importorskip("distributed", reason="the optional 'dask' extra is not installed")
+    monkeypatch.setattr(parallel, "_malloc_tuned", False)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cl:
+        assert run_chunks(_malloc_tuned, [0, 1], sizes=[1, 1], scheduler=cl.scheduler_address) == [True, True]
+
+
 def _findings(eyes, key: str | None = None):
     result = run_study(eyes)
     if key:
