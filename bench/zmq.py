@@ -44,6 +44,7 @@ def serve(argv: list[str]) -> None:
     """The facade process: prints ``port: N`` and serves until SIGTERM."""
     from eyehil.emulator.device.build import DeviceOptions, build_subject
     from eyehil.emulator.device.pupil.server import PupilServer, ServerOptions
+    from eyehil.stopping import wait_for_stop
 
     p = argparse.ArgumentParser(prog="python -m bench.zmq serve")
     p.add_argument("--rate", type=int, default=RATE_HZ)
@@ -62,7 +63,7 @@ def serve(argv: list[str]) -> None:
                             render_kind=args.render_kind)
     with PupilServer(subject, options=options) as server:
         print(f"port: {server.port}", flush=True)
-        stop.wait()
+        wait_for_stop(stop)  # in slices: SIGTERM may land on a worker thread (eyehil.stopping)
 
 
 @contextmanager

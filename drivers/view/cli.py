@@ -106,7 +106,7 @@ def close_view(server: ViewServer) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from eyehil.drivers.errors import TrackerError
-    from eyehil.drivers.view.server import wait_closed
+    from eyehil.stopping import wait_for_stop
 
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             print(f"eyehil view: {args.url}; Ctrl-C stops", flush=True)
             with contextlib.suppress(KeyboardInterrupt):
-                wait_closed(stop, args.duration)
+                wait_for_stop(stop, args.duration)
         finally:
             close_view(server)
     finally:

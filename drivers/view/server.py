@@ -16,7 +16,6 @@ from __future__ import annotations
 import asyncio
 import json
 import threading
-import time
 from pathlib import Path
 
 from aiohttp import WSMsgType, web
@@ -167,11 +166,3 @@ class ViewServer:
             self.session.submit({k: v for k, v in command.items() if isinstance(v, str | int | float)})
 
 
-def wait_closed(stop: threading.Event, duration: float | None) -> None:
-    """Block until `stop` is set or `duration` s pass (None: forever), waking up to notice Ctrl-C."""
-    deadline = None if duration is None else time.monotonic() + duration
-    while not stop.is_set():
-        remaining = 0.5 if deadline is None else min(0.5, deadline - time.monotonic())
-        if remaining <= 0:
-            return
-        stop.wait(remaining)

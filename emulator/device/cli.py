@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 
 from eyehil.emulator.scene.presets_index import preset_names
 from eyehil.protocols.address import port_number
+from eyehil.stopping import wait_for_stop
 
 if TYPE_CHECKING:
     from eyehil.emulator.device.build import DeviceOptions
@@ -172,7 +173,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"eyehil emulate: {opts.mode} device, scene {opts.scene}, eyes {opts.eyes}[{opts.eye}], "
                   f"script {opts.script}, {opts.clock} clock; Ctrl-C stops", flush=True)
             try:
-                stop.wait(args.duration)
+                wait_for_stop(stop, args.duration)  # in slices: the signal may land on another thread
             except KeyboardInterrupt:
                 interrupted = True  # the device and its links close first, then the usual exit for Ctrl-C
     finally:

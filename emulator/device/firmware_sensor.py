@@ -63,6 +63,7 @@ from eyehil.emulator.device.stimulus import stimulus_problem, stimulus_to_screen
 from eyehil.emulator.device.subject import Subject
 from eyehil.emulator.render.renderer import Frame, RenderSettings
 from eyehil.protocols.enums import Eye, StimulusFlags
+from eyehil.stopping import wait_for_stop
 
 MAX_LINE = 4096  # bytes of one request line
 TRUTH_KEPT = 4096  # frames whose ground truth `truth_at` still knows
@@ -369,7 +370,7 @@ def main(argv: list[str] | None = None) -> int:
         with SensorServer(FirmwareSensor.from_options(options, frames=args.frames), args.socket) as server:
             print(f"sensor: {server.path}", flush=True)
             with contextlib.suppress(KeyboardInterrupt):
-                stop.wait()
+                wait_for_stop(stop)  # in slices: the signal may land on another thread
     finally:
         signal.signal(signal.SIGTERM, previous)
     return 0
