@@ -96,7 +96,7 @@ def iter_chunks(
 def worker_pool(workers: int) -> Iterator[ProcessPoolExecutor]:
     """A process pool whose workers ignore Ctrl-C; if the block raises (Ctrl-C included) the pool is stopped at
     once (`stop_pool`), otherwise shut down as usual (waiting for the work)."""
-    pool = ProcessPoolExecutor(max_workers=workers, initializer=_ignore_sigint)
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=_init_worker)
     try:
         yield pool
     except BaseException:
@@ -125,7 +125,7 @@ def tuned_call(func: Callable[..., Any], chunk: Any, **kwargs: Any) -> Any:
     return func(chunk, **kwargs)
 
 
-def _ignore_sigint() -> None:
+def _init_worker() -> None:
     """Worker initializer: Ctrl-C is the main process's to handle (it terminates the workers); SIGTERM takes its
     default action whatever handler the forked parent had installed (terminate must end a worker); malloc's
     thresholds are fixed (`tune_malloc`)."""

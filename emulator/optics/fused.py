@@ -218,10 +218,10 @@ def _finish_stragglers(pair: BiconicPair, p: Vec, u: Vec, index: tuple[np.ndarra
     """`_biconic_hit`'s remaining steps for the elements at `index` only, written into t and the last iterate's
     (x, y, disc, f, s_x, s_y) in place."""
     shape = t.shape
-    pick = lambda v: np.broadcast_to(v, shape)[index]  # noqa: E731
-    (px, py, pz), (ux, uy, uz), back = map(pick, p), map(pick, u), tuple(map(pick, pair.back[:4]))
+    ray = [np.broadcast_to(v, shape)[index] for v in (*p, *u, *pair.back[:4])]  # px py pz ux uy uz, 4 shape
     ti = t[index]
     for _ in range(MAX_NEWTON):
+        px, py, pz, ux, uy, uz, *back = ray
         x, y = px + ti * ux, py + ti * uy
         s, disc, sx, sy = sag(*back, x, y)
         f = -(pz + ti * uz) - s
@@ -236,8 +236,7 @@ def _finish_stragglers(pair: BiconicPair, p: Vec, u: Vec, index: tuple[np.ndarra
         if not still.any():
             return
         index = tuple(i[still] for i in index)
-        (px, py, pz, ux, uy, uz), back, ti = ((v[still] for v in (px, py, pz, ux, uy, uz)),
-                                              tuple(v[still] for v in back), ti[still])
+        ray, ti = [v[still] for v in ray], ti[still]
 
 
 def _posterior_hit(pair: BiconicPair, p: Vec, u: Vec, start: np.ndarray | None):

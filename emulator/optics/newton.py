@@ -190,4 +190,3 @@ def difference_jacobian(f: Residual, q: np.ndarray, r: np.ndarray, index, h: flo
     j = np.stack([(rx - r) / h, (ry - r) / h], axis=-1)
     j[~(okx & oky)] = np.nan
     return j
-

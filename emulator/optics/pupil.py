@@ -185,7 +185,7 @@ def _first_guess(optics: CorneaOptics, camera: np.ndarray, target: np.ndarray) -
     surface = optics.anterior
     t, ok = (surface.guide_intersect if isinstance(surface, Biconic) else surface.intersect)(camera, direction)
     hit = camera + np.nan_to_num(t)[..., None] * direction
-    return np.where(ok[..., None], optics.anterior.coords(hit), optics.anterior.coords(image))
+    return np.where(ok[..., None], surface.coords(hit), surface.coords(image))
 
 
 def pupil_boundary(
