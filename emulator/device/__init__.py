@@ -10,7 +10,8 @@
   `render_pool` (images rendered off the device's thread: worker processes or threads);
 - `stimulus`: the STIMULUS side channel, the emulator's stand-in for the screen (one coordinate conversion);
 - `links/`: the device side of pty, TCP, USB/IP and the in-process loop;
-- `pupil/`: the Pupil Capture facade (ZeroMQ Pupil Core Network API); `lsl`: the LSL outlet;
+- `pupil/`: the Pupil Capture facade (ZeroMQ Pupil Core Network API); `lsl/`: its LSL outlet (a process of
+  its own, kept on the loopback);
 - `opengaze/`: the Gazepoint Open Gaze API facade (XML over TCP, port 4242);
 - `firmware_sensor`: the camera behind the C firmware's host HAL (firmware_stubs/);
 - `build` (a device from named options), `setup_file` (the host's geometry file), `cli` (`eyehil

@@ -8,7 +8,8 @@ import math
 import pytest
 from zmq_helpers import eventually
 
-from eyehil.emulator.device.lsl import LslUnavailableError, gaze_channels, load_pylsl
+from eyehil.emulator.device.lsl.channels import gaze_channels
+from eyehil.emulator.device.lsl.library import LslUnavailableError, load_pylsl
 
 try:
     pylsl = load_pylsl()

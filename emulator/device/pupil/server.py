@@ -10,7 +10,8 @@ relayed on the thread "eyehil-zmq-backbone".
 Clients publish to the XSUB (``PUB_PORT``) and subscribe to the XPUB (``SUB_PORT``); the device thread
 (`zmq_core`, "eyehil-zmq-publisher"), the frame thread (`zmq_frames`, "eyehil-zmq-frames") and the world
 thread (`pupil/world.py`, "eyehil-zmq-world") publish through the backbone too. Everything binds to
-127.0.0.1 unless `host` names another interface.
+127.0.0.1 unless `host` names another interface; so does the LSL outlet (`lsl.outlet`: on the loopback for a
+loopback `host`, on every interface otherwise).
 
 Start-up checks the path from Pupil Remote's publisher to the device thread's subscriber (a probe
 notification, ``eyehil.ready``, until it arrives) so that no command sent right after start is lost to
@@ -20,6 +21,7 @@ the private `zmq.Context`; the server registers itself with `links.register_open
 
 from __future__ import annotations
 
+import ipaddress
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -62,7 +64,7 @@ class ServerOptions:
     seed: int = 0  # image noise
     record_dir: str | None = None  # where `R` writes recording folders (None: none, annotations in memory only)
     record_max_bytes: int = RECORD_MAX_BYTES  # datums all recordings of this facade may write, in total
-    lsl: bool = False  # also open an LSL outlet of type Gaze (`lsl_outlet`, needs pylsl)
+    lsl: bool = False  # also open an LSL outlet of type Gaze (`lsl.outlet`, needs pylsl); it binds as `host` does
     surface_name: str = "screen"  # the screen's surface topic: surfaces.<name>
     lsl_layout: str = "eyehil"  # or "pupil_relay": Pupil Capture's LSL relay name and channels
     world_rate_hz: float = 30.0  # frame.world images per second (0: none)
@@ -103,8 +105,8 @@ class PupilServer:
     @property
     def outlet_source_id(self) -> str:
         """The LSL outlet's source id: the same for the same device (scene, eyes, eye anatomy, head, address
-        asked for, layout) after a restart (`lsl_outlet.stable_source_id`)."""
-        from eyehil.emulator.device.lsl import stable_source_id
+        asked for, layout) after a restart (`lsl.outlet.stable_source_id`)."""
+        from eyehil.emulator.device.lsl.outlet import stable_source_id
 
         solver, o = self.subject.solver, self.options
         return stable_source_id(solver.scene.name, solver.scene.sides, repr(solver.eye), solver.head, o.host,
@@ -179,13 +181,14 @@ class PupilServer:
         if o.lsl:
             import numpy as np
 
-            from eyehil.emulator.device.lsl import GazeOutlet
+            from eyehil.emulator.device.lsl.outlet import GazeOutlet
 
             scene = solver.scene
             self.outlet = GazeOutlet(windows, len(scene.leds), o.rate_hz, self.clock, name="eyehil",
                                      source_id=self.outlet_source_id, layout=o.lsl_layout,
                                      screen=(scene.screen.centre, scene.screen.size),
-                                     pupil_mm=2.0 * float(np.asarray(solver.eye.pupil_radius).reshape(-1)[0]))
+                                     pupil_mm=2.0 * float(np.asarray(solver.eye.pupil_radius).reshape(-1)[0]),
+                                     bind="loopback" if loopback(o.host) else "all")
             self._parts.append(self.outlet)
         capture = Capture(solver.scene, eye_ids, self.time, lambda xy, t_us: device.show(xy, t_us),
                           settle_s=o.settle_s, frame_format=o.frame_format, record_dir=o.record_dir,
@@ -250,6 +253,16 @@ class PupilServer:
         unregister(self)
 
 
+def loopback(host: str) -> bool:
+    """`host` (an interface to bind) reaches this machine only."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:  # "", "*", a host name
+        return False
+
+
 def server_for(options: DeviceOptions, host: str = "127.0.0.1", port: int = 50020, *, lsl: bool = False,
                **server: object) -> PupilServer:
     """An unstarted facade for device `options` (`eyehil emulate --link zmq`): its subject, clock, rate and seed;
@@ -257,7 +270,7 @@ def server_for(options: DeviceOptions, host: str = "127.0.0.1", port: int = 5002
     if options.mode != "native":
         raise ValueError("--link zmq emulates Pupil Capture: no ISCAN mode")
     if lsl:
-        from eyehil.emulator.device.lsl import LslUnavailableError, load_pylsl
+        from eyehil.emulator.device.lsl.library import LslUnavailableError, load_pylsl
 
         try:
             load_pylsl()
