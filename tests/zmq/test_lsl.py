@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 from zmq_helpers import eventually
 
-from eyehil.emulator.device.lsl.channels import gaze_channels
+from eyehil.emulator.device.lsl.channels import gaze_channels, relay_channels, relay_rows
 from eyehil.emulator.device.lsl.library import LslUnavailableError, load_pylsl
+from eyehil.emulator.device.pupil.gaze import Block
 
 try:
     pylsl = load_pylsl()
@@ -94,3 +96,26 @@ def test_pupil_relay_layout(server) -> None:
     finally:
         inlet.close_stream()
         del inlet
+
+
+def test_relay_rows_carry_the_3d_eye_model() -> None:
+    n = 3
+    block = Block(time_us=np.arange(n), pupil=np.zeros((n, 2, 2)),
+                  diameter=np.array([[30.0, 31.0], [30.0, np.nan], [30.0, 31.0]]), confidence=np.ones((n, 2)),
+                  glints=np.zeros((n, 2, 1, 2)), gaze=np.array([[0.5, 0.5], [0.25, 0.75], [np.nan, np.nan]]),
+                  gaze_confidence=np.array([1.0, 1.0, 0.0]))
+    centre, size = np.array([0.0, 0.0, 650.0]), (400.0, 300.0)
+    eyes = np.array([[-30.0, 0.0, 0.0], [30.0, 0.0, 0.0]])  # solver order: right (id 0), left (id 1)
+    rows = relay_rows(block, (0, 1), centre, size, 4.0, eyes)
+    labels = [c.label for c in relay_channels()]
+    col = {label: i for i, label in enumerate(labels)}
+    point = rows[:, [col["gaze_point_3d_x"], col["gaze_point_3d_y"], col["gaze_point_3d_z"]]]
+    assert point[0] == pytest.approx([0.0, 0.0, 650.0]) and point[1] == pytest.approx([100.0, 75.0, 650.0])
+    for eye_id in (0, 1):
+        c = rows[:, [col[f"eye_center{eye_id}_3d_{a}"] for a in "xyz"]]
+        g = rows[:, [col[f"gaze_normal{eye_id}_{a}"] for a in "xyz"]]
+        assert c[0] == pytest.approx(eyes[eye_id])
+        expected = (point[0] - eyes[eye_id]) / np.linalg.norm(point[0] - eyes[eye_id])
+        assert g[0] == pytest.approx(expected) and np.linalg.norm(g[0]) == pytest.approx(1.0)
+        assert np.isnan(c[2]).all() and np.isnan(g[2]).all()  # no gaze
+    assert np.isnan(rows[1, col["eye_center1_3d_x"]]) and np.isfinite(rows[1, col["eye_center0_3d_x"]])  # not found

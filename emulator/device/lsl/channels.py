@@ -18,9 +18,10 @@ normalised coordinates are those of the ZeroMQ datums (`pupil.datums`, `pupil.ca
 
 With the layout "pupil_relay" the stream is laid out as Pupil Capture's LSL relay (pupil-labs
 `pupil_capture_lsl_relay`, outlet v2): 22 channels: confidence, norm_pos_x/y, gaze_point_3d_x/y/z (mm; here
-the gaze point on the screen in the scene frame), then per eye 0 and 1 eye_center{i}_3d_x/y/z and
-gaze_normal{i}_x/y/z (NaN), and diameter{i}_2d (px), diameter{i}_3d (mm; the anatomical pupil, NaN when not
-detected).
+the gaze point on the screen in the scene frame), then per eye 0 and 1 eye_center{i}_3d_x/y/z (mm, scene frame:
+the 3-D eye model's sphere centre, `pupil.eye3d`) and gaze_normal{i}_x/y/z (unit, from that centre to the gaze
+point), NaN without gaze or where the eye's pupil was not detected, and diameter{i}_2d (px), diameter{i}_3d (mm;
+the anatomical pupil, NaN when not detected).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from eyehil.emulator.device.pupil.calibration import norm_to_screen
 from eyehil.emulator.device.pupil.gaze import Block
 
 
@@ -74,16 +76,25 @@ def relay_channels() -> list[Channel]:
 
 
 def relay_rows(block: Block, eye_ids: tuple[int, ...], screen_centre: np.ndarray, screen_mm: tuple[float, float],
-               pupil_mm: float) -> np.ndarray:
-    """Samples (N, 22) of a mapped block in `relay_channels` order."""
+               pupil_mm: float, eye_centres: np.ndarray | None = None) -> np.ndarray:
+    """Samples (N, 22) of a mapped block in `relay_channels` order; `eye_centres` (E, 3) scene mm, the 3-D eye
+    model's sphere centres of the eyes in `eye_ids` order (`pupil.eye3d`), fill eye_center{i}_3d and
+    gaze_normal{i} (unit, from the eye centre to the gaze point, as in ``gaze.3d`` datums) where the gaze is
+    known and the eye's pupil was detected."""
     n = len(block.time_us)
     out = np.full((n, 22), np.nan)
     out[:, 0], out[:, 1:3] = block.gaze_confidence, block.gaze
-    x_mm, y_mm = (0.5 - block.gaze[:, 0]) * screen_mm[0], (block.gaze[:, 1] - 0.5) * screen_mm[1]
-    out[:, 3:6] = screen_centre + np.stack([x_mm, y_mm, np.zeros(n)], axis=1)
+    point = np.asarray(screen_centre, float) + np.concatenate([norm_to_screen(screen_mm, block.gaze),
+                                                               np.zeros((n, 1))], axis=1)
+    out[:, 3:6] = point
     for e, eye_id in enumerate(eye_ids):
         out[:, 18 + eye_id] = block.diameter[:, e]
         out[:, 20 + eye_id] = np.where(np.isfinite(block.diameter[:, e]), pupil_mm, np.nan)
+        if eye_centres is not None:
+            ok = np.isfinite(point).all(axis=1) & np.isfinite(block.diameter[:, e])
+            towards = point[ok] - eye_centres[e]
+            out[ok, 6 + 3 * eye_id:9 + 3 * eye_id] = eye_centres[e]
+            out[ok, 12 + 3 * eye_id:15 + 3 * eye_id] = towards / np.linalg.norm(towards, axis=1, keepdims=True)
     return out
 
 

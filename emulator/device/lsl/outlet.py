@@ -170,15 +170,16 @@ class GazeOutlet:
     def __init__(self, windows: list[EyeWindow], n_leds: int, rate_hz: float, clock: Clock, *,
                  name: str = "eyehil", source_id: str | None = None, layout: str = "eyehil",
                  screen: tuple[np.ndarray, tuple[float, float]] | None = None, pupil_mm: float = float("nan"),
-                 bind: str = "loopback") -> None:
+                 eye_centres: np.ndarray | None = None, bind: str = "loopback") -> None:
         """An outlet for the eyes of `windows` with `n_leds` glints each; `clock`: the device clock; `layout`
-        "pupil_relay" (name ``pupil_capture``) needs `screen` (centre mm, size mm) and the pupil diameter;
-        `bind`: "loopback" or "all" (see the module docstring)."""
+        "pupil_relay" (name ``pupil_capture``) needs `screen` (centre mm, size mm) and the pupil diameter, and
+        takes the 3-D eye model's centres (`channels.relay_rows`); `bind`: "loopback" or "all" (see the module
+        docstring)."""
         if layout not in LAYOUTS:
             raise ValueError(f"LSL layout must be one of {LAYOUTS}, got {layout!r}")
         self._lsl = load_pylsl()  # here only for local_clock: this process opens no LSL socket
         self.clock, self.layout, self.eye_ids = clock, layout, tuple(w.eye_id for w in windows)
-        self.screen, self.pupil_mm = screen, pupil_mm
+        self.screen, self.pupil_mm, self.eye_centres = screen, pupil_mm, eye_centres
         if layout == "pupil_relay":
             name, self.channels = "pupil_capture", relay_channels()
         else:
@@ -209,7 +210,7 @@ class GazeOutlet:
         """Push the block's samples with their explicit timestamps."""
         if self.process is None or len(block.time_us) == 0:
             return
-        rows = (relay_rows(block, self.eye_ids, self.screen[0], self.screen[1], self.pupil_mm)
+        rows = (relay_rows(block, self.eye_ids, self.screen[0], self.screen[1], self.pupil_mm, self.eye_centres)
                 if self.layout == "pupil_relay" else block_rows(block))
         self.process.send(rows, self.lsl_times(block.time_us))
 

@@ -37,6 +37,7 @@ from eyehil.emulator.device.pupil.backbone import MAX_MESSAGE_BYTES, Backbone, b
 from eyehil.emulator.device.pupil.capture import RECORD_MAX_BYTES, Capture
 from eyehil.emulator.device.pupil.core import DeviceThread
 from eyehil.emulator.device.pupil.datums import PupilTime, eye_windows
+from eyehil.emulator.device.pupil.eye3d import EyeModel3d
 from eyehil.emulator.device.pupil.frames import FramePublisher
 from eyehil.emulator.device.pupil.remote import PupilRemote
 from eyehil.emulator.device.pupil.world import MAX_WIDTH_PX, MIN_WIDTH_PX, WORLD_WIDTH_PX, WorldPublisher, WorldView
@@ -188,6 +189,7 @@ class PupilServer:
                                      source_id=self.outlet_source_id, layout=o.lsl_layout,
                                      screen=(scene.screen.centre, scene.screen.size),
                                      pupil_mm=2.0 * float(np.asarray(solver.eye.pupil_radius).reshape(-1)[0]),
+                                     eye_centres=EyeModel3d.of(solver).centres,
                                      bind="loopback" if loopback(o.host) else "all")
             self._parts.append(self.outlet)
         capture = Capture(solver.scene, eye_ids, self.time, lambda xy, t_us: device.show(xy, t_us),
