@@ -19,6 +19,7 @@ from eyehil.emulator.render.renderer import (
     render_full,
     render_roi,
     roi_window,
+    uniform16,
 )
 from eyehil.emulator.scene import load_scene
 
@@ -84,6 +85,18 @@ def test_frames_are_deterministic_given_the_generator(guestrin):
     assert a.dtype == np.uint8 and a.shape == (240, 320)
     np.testing.assert_array_equal(a, b)
     assert np.any(a != c)
+
+
+def test_uniform16_draws_every_value_evenly_and_reproducibly() -> None:
+    n = 1_000_003  # not a multiple of four
+    a = uniform16(np.random.default_rng(5), n)
+    assert a.dtype == np.uint16 and a.shape == (n,)
+    assert np.array_equal(a, uniform16(np.random.default_rng(5), n))
+    counts = np.bincount(a >> 8, minlength=256)  # the high byte: 256 cells of about 3,906
+    chi2 = float(((counts - n / 256) ** 2 / (n / 256)).sum())
+    assert 150 < chi2 < 380  # chi-square(255): P(< 150) = 2e-8, P(> 380) = 6e-7
+    low = np.bincount(a & 0xFF, minlength=256)
+    assert 150 < float(((low - n / 256) ** 2 / (n / 256)).sum()) < 380
 
 
 def test_noise_matches_read_and_shot_noise(guestrin):

@@ -10,10 +10,10 @@ noise and saturation:
     noise  = N(0, 1) * sqrt((g read_noise_dn)^2 + g k signal),    k = saturation_dn / full_well_e (DN/e-)
     pixel  = clip(round(signal + noise), 0, saturation_dn)
 
-The normal deviates are 16-bit uniform integers from the caller's `numpy.random.Generator` mapped through
-the inverse normal CDF (exact quantiles, tails cut at 4.3 sigma): about five times faster than
-`Generator.standard_normal`. A frame is a deterministic function of its geometry, settings and generator
-state.
+The normal deviates are 16-bit uniform integers (the raw 64-bit words of the caller's `numpy.random.Generator`'s
+bit generator, four to a word) mapped through the inverse normal CDF (exact quantiles, tails cut at 4.3 sigma):
+about five times faster than `Generator.standard_normal`. A frame is a deterministic function of its geometry,
+settings and generator state.
 
 Windows: a region of interest (`render_roi`, default 320 x 240 px centred on the pupil, kept on the
 sensor) as real devices stream, or the full sensor (`render_full`, every eye of the sample). Ground truth
@@ -194,13 +194,19 @@ def expose(signal: np.ndarray, sensor: Sensor, rng: np.random.Generator) -> np.n
         np.maximum(sigma, 0.0, out=sigma)
         sigma += np.float32(read * read)
         np.sqrt(sigma, out=sigma)
-        uniform = np.frombuffer(rng.bytes(2 * signal.size), dtype=np.uint16).reshape(signal.shape)
+        uniform = uniform16(rng, signal.size).reshape(signal.shape)
         np.take(_NORMAL_TABLE, uniform, out=normal)
         sigma *= normal
         signal += sigma
     signal += 0.5
     np.clip(signal, 0.0, sensor.saturation_dn + 0.49, out=signal)
     return signal.astype(np.uint8) if sensor.saturation_dn <= 255 else signal.astype(np.uint16)
+
+
+def uniform16(rng: np.random.Generator, n: int) -> np.ndarray:
+    """`n` uniform 16-bit integers: the generator's raw 64-bit words, four to a word. Ten times faster than
+    `Generator.bytes`, which draws 32-bit integers and copies them into a bytes object."""
+    return rng.bit_generator.random_raw(-(-n // 4)).view(np.uint16)[:n]
 
 
 def _scratch(shape: tuple[int, ...]) -> list[np.ndarray]:
