@@ -340,6 +340,11 @@ def test_two_hidden_effects_are_named_in_order_of_size(hidden_eyes) -> None:
     inter = result.interactions
     assert inter is not None and set(inter.alone) == {"pupil_change", "feature_noise"}
     assert inter.alone["pupil_change"] < inter.alone["feature_noise"] and np.isfinite(inter.interaction)
+    first = result.rounds[0].added.effect.name
+    assert {f.effect.name for f in result.rounds[1].fits} == set(CANDIDATES) - {first}  # round 2: every effect left
+    assert result.final.D <= result.rounds[1].added.D + 1e-9  # backfitting the first effect never raises D
+    added = {a.effect.name: a.values for a in result.added}
+    assert added["pupil_change"]["delta_diameter_mm"] == pytest.approx(-0.7, abs=0.1)
 
 
 def test_recordings_round_trip_and_a_hidden_effect_is_named_from_them(tmp_path, hidden_eyes) -> None:

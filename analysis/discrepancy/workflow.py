@@ -7,13 +7,14 @@ add them to the model, and show the gap shrink, or say that no known effect expl
    significant gap: stop.
 2. name (`name_effects`): every effect of the catalogue (`eyehil.emulator.effects`) that can act in this
    experiment and is not in the model yet is fitted to minimise D (`eyehil.analysis.discrepancy.search`: a
-   screen of all, refinement of the best few) and ranked by D + 2k (k fitted parameters). Rounds after
-   the first consider only the effects that lowered D significantly in round 1 (at most
-   `LATER_CANDIDATES`): an effect that explains nothing alone is not tried as a second effect.
+   screen of all, refinement of the best few) and ranked by D + 2k (k fitted parameters), in every round
+   (not only those that lowered D in round 1: that hides a pair's smaller effect, whose drop of D in round 1
+   is scaled down by the larger one's misfit).
 3. add: the top-ranked effect joins the model at its fitted values if it lowers D by more than the
    chi-square(k) 95 % point (after the misfit scale factor) and no fitted parameter is at the edge of its
    plausible range (`EffectFit.passes`). Otherwise nothing is added and the round says why.
    Steps 1-3 repeat for up to `rounds` rounds (a second effect is fitted with the first in the model).
+   With two or more effects added, each is refitted with the others in the model (`_backfit`).
 4. show (`run_discrepancy`): the comparison before and after, on the (usually larger) show eyes.
 
 The **outcome** (`DiscrepancyResult.outcome`) is decided by a stated criterion:
@@ -53,7 +54,6 @@ from eyehil.emulator.eye.model import EyeModel
 from eyehil.parallel import worker_pool
 
 ALPHA_GOF = 0.01
-LATER_CANDIDATES = 8
 CHUNK = 12  # points per evaluation call (each a batched calibration)
 
 
@@ -206,8 +206,6 @@ def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel
         done, added, fits = [], [], []
         names = list(effect_names or registry.names())
         for i in range(rounds):
-            if i == 1:  # later rounds: the effects that lowered D in round 1
-                names = [f.effect.name for f in done[0].fits if f.lowers()][:LATER_CANDIDATES]
             current = _round(search, measured, names, alpha, progress, f"round {i + 1}")
             done.append(current)
             if current.added is None:
@@ -217,7 +215,10 @@ def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel
             progress.stage(f"round {i + 1}: the model with {current.added.effect.name}", 1)
             search = search.with_base(added)
             progress.advance(1)
-        final = done[-1].before if done[-1].added is None else find(search, measured, alpha)
+        if len(added) > 1:
+            added, fits = _backfit(initial, measured, added, fits, alpha, progress)
+            search = initial.with_base(added)
+        final = find(search, measured, alpha) if len(added) > 1 or done[-1].added is not None else done[-1].before
         interactions = None
         if len(added) > 1:
             progress.stage("interactions of the added effects", 1)
@@ -288,6 +289,25 @@ def _round(search: Evaluator, measured: Measured, effect_names, alpha, progress,
         if effect_names is None or len(effect_names) else []
     best = fits[0] if fits and fits[0].passes() else None
     return Round(before, fits, best, _verdict(best, fits))
+
+
+def _backfit(initial: Evaluator, measured: Measured, added: list[Applied], fits: list[EffectFit], alpha: float,
+             progress: Progress) -> tuple[list[Applied], list[EffectFit]]:
+    """Refit each added effect with the others in the model at their current values (one sweep, in the order
+    added). The first effect was fitted while the second's gap was still unexplained and took up part of it;
+    refitted with the second in the model it gives that part back. A refit replaces the effect's values only
+    where it lowers D with all added effects and ends inside the plausible range."""
+    added, fits = list(added), list(fits)
+    reference = initial.experiment.reference
+    current = compare(initial.with_base(added).base_metrics, measured, reference, alpha, tests=False).D
+    progress.stage("backfitting the added effects", sum(max_evaluations(a.effect) for a in added))
+    for j, applied in enumerate(added):
+        others = initial.with_base(added[:j] + added[j + 1:])
+        before = compare(others.base_metrics, measured, reference, alpha, tests=False)
+        [fit] = name_effects(others, measured, before, [applied.effect.name], alpha, progress)
+        if current > fit.D and not fit.at_edge:
+            added[j], fits[j], current = fit.applied, fit, fit.D
+    return added, fits
 
 
 def _verdict(best: EffectFit | None, fits: list[EffectFit]) -> str:
