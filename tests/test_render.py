@@ -15,6 +15,7 @@ from eyehil.emulator.render.renderer import (
     Appearance,
     RenderSettings,
     Sensor,
+    expose,
     render_features,
     render_full,
     render_roi,
@@ -85,6 +86,21 @@ def test_frames_are_deterministic_given_the_generator(guestrin):
     assert a.dtype == np.uint8 and a.shape == (240, 320)
     np.testing.assert_array_equal(a, b)
     assert np.any(a != c)
+
+
+@pytest.mark.parametrize("sensor", [Sensor(), Sensor(gain_db=12.0, read_noise_dn=3.0), Sensor(saturation_dn=1023)])
+def test_flat_regions_from_the_table_equal_the_pixel_by_pixel_noise(sensor) -> None:
+    rng = np.random.default_rng(3)
+    canvas = np.full((120, 160), np.float32(40.0 * 10 ** (sensor.gain_db / 20)), np.float32)
+    boxes = [(10, 60, 20, 90), (40, 110, 70, 150), None]  # the first two overlap
+    for r0, r1, c0, c1 in boxes[:2]:
+        canvas[r0:r1, c0:c1] = rng.uniform(0.0, 1.2 * sensor.saturation_dn, (r1 - r0, c1 - c0))
+    canvas[:5, :5] = -3.0  # below zero and saturated values take the same paths in both
+    boxes.append((0, 5, 0, 5))
+    flat = expose(canvas.copy(), sensor, np.random.default_rng(9), flat=(float(canvas[-1, 0]), boxes))
+    plain = expose(canvas.copy(), sensor, np.random.default_rng(9))
+    assert flat.dtype == plain.dtype and np.array_equal(flat, plain)
+    assert len(np.unique(flat[-30:, :15])) > 3  # the flat part is noisy, not a constant
 
 
 def test_uniform16_draws_every_value_evenly_and_reproducibly() -> None:

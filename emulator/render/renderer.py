@@ -22,6 +22,7 @@ sensor) as real devices stream, or the full sensor (`render_full`, every eye of 
 
 from __future__ import annotations
 
+import functools
 import threading
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field, replace
@@ -170,7 +171,7 @@ def render_window(outline: EyeOutline, rng: np.random.Generator, *, origin: tupl
     boxes = [draw_eye(canvas, origin, outline[i], levels, rng) for i in range(outline.shape[0])]
     for box in boxes:
         _blur(canvas, box, settings.sensor.blur_sigma_px)
-    image = expose(canvas, settings.sensor, rng)
+    image = expose(canvas, settings.sensor, rng, flat=(levels.skin, boxes))
     return Frame(image=image, roi_xy=origin, truth=truth(outline, origin, size), sensor_px=outline.sensor_px)
 
 
@@ -183,24 +184,63 @@ def _blur(canvas: np.ndarray, box: Box | None, sigma: float) -> None:
     cv2.GaussianBlur(region, (0, 0), sigma, dst=region, borderType=cv2.BORDER_REPLICATE)
 
 
-def expose(signal: np.ndarray, sensor: Sensor, rng: np.random.Generator) -> np.ndarray:
+def expose(signal: np.ndarray, sensor: Sensor, rng: np.random.Generator, *,
+           flat: tuple[float, list[Box | None]] | None = None) -> np.ndarray:
     """Add read and shot noise to `signal` (float32 DN, modified in place), saturate and quantise to uint8
-    (uint16 above 8 bits)."""
+    (uint16 above 8 bits).
+
+    `flat` (level, boxes): the signal is `level` everywhere outside `boxes` (canvas rows [r0, r1), columns
+    [c0, c1)). Those pixels are then looked up in the table of that level's 65,536 outcomes (`flat_table`) and
+    only the boxes are computed pixel by pixel: the same uniform draws and the same float32 arithmetic, so the
+    same image, bit for bit."""
+    read, k = _noise(sensor)
+    if not (read > 0 or k > 0):
+        return _quantise(signal, sensor)
+    uniform = uniform16(rng, signal.size).reshape(signal.shape)
+    if flat is None:
+        return _pixels(signal, uniform, sensor, _scratch(signal.shape)[1:])
+    level, boxes = flat
+    out = np.take(flat_table(float(level), sensor), uniform)
+    for box in boxes:
+        if box is not None:
+            r0, r1, c0, c1 = box
+            out[r0:r1, c0:c1] = _pixels(signal[r0:r1, c0:c1].copy(), uniform[r0:r1, c0:c1], sensor)  # boxes may overlap
+    return out
+
+
+def _noise(sensor: Sensor) -> tuple[float, float]:
+    """Read noise (DN) and shot-noise gain k (DN per DN of signal) at the sensor's gain."""
     g = 10 ** (sensor.gain_db / 20)
-    read, k = g * sensor.read_noise_dn, g * sensor.saturation_dn / sensor.full_well_e
-    if read > 0 or k > 0:
-        _, sigma, normal = _scratch(signal.shape)
-        np.multiply(signal, np.float32(k), out=sigma)
-        np.maximum(sigma, 0.0, out=sigma)
-        sigma += np.float32(read * read)
-        np.sqrt(sigma, out=sigma)
-        uniform = uniform16(rng, signal.size).reshape(signal.shape)
-        np.take(_NORMAL_TABLE, uniform, out=normal)
-        sigma *= normal
-        signal += sigma
+    return g * sensor.read_noise_dn, g * sensor.saturation_dn / sensor.full_well_e
+
+
+def _pixels(signal: np.ndarray, uniform: np.ndarray, sensor: Sensor, work: list[np.ndarray] | None = None
+            ) -> np.ndarray:
+    """Pixels of `signal` (float32, modified in place) with the noise of the 16-bit `uniform` draws; `work`:
+    two float32 arrays of the signal's shape to use (fresh ones if None)."""
+    read, k = _noise(sensor)
+    sigma, normal = work if work is not None else (np.empty(signal.shape, np.float32) for _ in range(2))
+    np.multiply(signal, np.float32(k), out=sigma)
+    np.maximum(sigma, 0.0, out=sigma)
+    sigma += np.float32(read * read)
+    np.sqrt(sigma, out=sigma)
+    np.take(_NORMAL_TABLE, uniform, out=normal)
+    sigma *= normal
+    signal += sigma
+    return _quantise(signal, sensor)
+
+
+def _quantise(signal: np.ndarray, sensor: Sensor) -> np.ndarray:
+    """Round, saturate and convert `signal` (float32 DN, modified in place)."""
     signal += 0.5
     np.clip(signal, 0.0, sensor.saturation_dn + 0.49, out=signal)
     return signal.astype(np.uint8) if sensor.saturation_dn <= 255 else signal.astype(np.uint16)
+
+
+@functools.lru_cache(maxsize=16)
+def flat_table(level: float, sensor: Sensor) -> np.ndarray:
+    """The pixel of a signal of `level` DN for each of the 65,536 uniform draws (`_pixels` of each)."""
+    return _pixels(np.full(65536, level, np.float32), np.arange(65536, dtype=np.uint16), sensor)
 
 
 def uniform16(rng: np.random.Generator, n: int) -> np.ndarray:
