@@ -107,6 +107,8 @@ def test_the_loopback_library_is_built_once_per_source(tmp_path, monkeypatch) ->
     assert sorted(p.name for p in tmp_path.iterdir()) == [first.name]  # no scratch file left
     with pytest.raises(loopback.LibraryUnavailableError, match="no C compiler"):
         loopback.library(tmp_path / "elsewhere")
+    with pytest.raises(loopback.LibraryUnavailableError, match="a space or colon"):
+        loopback.library(tmp_path / "my cache")
     env = loopback.preloaded({"LD_PRELOAD": "/x/other.so"}, first)
     assert env["LD_PRELOAD"] == f"{first} /x/other.so"
 

@@ -42,6 +42,8 @@ def library(folder: Path | None = None) -> Path:
     source = SOURCE.read_bytes()
     folder = folder or cache_dir()
     target = folder / f"loopback_bind-{hashlib.sha256(source).hexdigest()[:16]}.so"
+    if any(c in str(target) for c in " :"):  # LD_PRELOAD separates its entries by spaces and colons
+        raise LibraryUnavailableError(f"LD_PRELOAD cannot name {target} (a space or colon): set EYEHIL_CACHE")
     if target.is_file():
         return target
     compiler = os.environ.get("CC") or "cc"
