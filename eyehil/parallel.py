@@ -16,7 +16,9 @@ Ctrl-C (or any error) stops the work at once: the queued chunks are cancelled an
 terminated, rather than waited for; the workers ignore SIGINT themselves (a terminal's Ctrl-C reaches the whole
 process group), so the main process alone decides and no worker prints a traceback. SIGINT is blocked while the
 workers are forked (`submit` forks them), so that none can see a Ctrl-C before it ignores it; a Ctrl-C in that
-moment waits, pending, and is delivered once the workers exist.
+moment waits, pending, and is delivered once the workers exist. A worker ends by itself once the process that
+started it is gone (`exit_with_parent`), so a main process killed with SIGKILL leaves no worker behind; the
+render processes of `eyehil emulate` do the same.
 """
 
 from __future__ import annotations
@@ -25,6 +27,8 @@ import ctypes
 import os
 import signal
 import sys
+import threading
+import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
@@ -33,6 +37,8 @@ from typing import Any
 
 #: s to wait for each terminated worker to exit
 JOIN_TIMEOUT_S = 5.0
+#: s between a worker's checks that the process that started it is still there (`exit_with_parent`)
+PARENT_POLL_S = 0.5
 #: glibc mallopt parameters and the values `tune_malloc` sets: allocations up to 32 MiB (glibc's largest mmap
 #: threshold on 64-bit) come from the heap, and up to 256 MiB of freed heap stay with the process
 M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
@@ -96,7 +102,7 @@ def iter_chunks(
 def worker_pool(workers: int) -> Iterator[ProcessPoolExecutor]:
     """A process pool whose workers ignore Ctrl-C; if the block raises (Ctrl-C included) the pool is stopped at
     once (`stop_pool`), otherwise shut down as usual (waiting for the work)."""
-    pool = ProcessPoolExecutor(max_workers=workers, initializer=_init_worker)
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(os.getpid(),))
     try:
         yield pool
     except BaseException:
@@ -125,14 +131,36 @@ def tuned_call(func: Callable[..., Any], chunk: Any, **kwargs: Any) -> Any:
     return func(chunk, **kwargs)
 
 
-def _init_worker() -> None:
+def _init_worker(parent: int | None = None) -> None:
     """Worker initializer: Ctrl-C is the main process's to handle (it terminates the workers); SIGTERM takes its
     default action whatever handler the forked parent had installed (terminate must end a worker); malloc's
-    thresholds are fixed (`tune_malloc`)."""
+    thresholds are fixed (`tune_malloc`); the worker ends with `parent`, the pool's process (`exit_with_parent`)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     tune_malloc()
+    exit_with_parent(parent)
+
+
+def exit_with_parent(parent: int | None = None, poll_s: float = PARENT_POLL_S) -> threading.Thread:
+    """End this process (`os._exit`) once its parent is no longer process `parent` (default: the parent it has
+    now), checked every `poll_s` on a daemon thread.
+
+    A pool worker waits for its next task on a pipe whose other end it holds itself, so a parent killed with
+    SIGKILL (or by the out-of-memory killer) left its workers waiting forever. Pass the starting process's id,
+    taken in that process: a worker that starts after its parent has died then ends at once, instead of taking
+    its new parent for the old one. (Linux's PR_SET_PDEATHSIG follows the thread that started the worker, not
+    the process.)"""
+    parent = os.getppid() if parent is None else parent
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(poll_s)
+        os._exit(1)
+
+    thread = threading.Thread(target=watch, name="eyehil-exit-with-parent", daemon=True)
+    thread.start()
+    return thread
 
 
 def stop_pool(pool: ProcessPoolExecutor) -> None:

@@ -25,6 +25,7 @@ called (from a pool thread) whenever a job finishes, so a device thread waiting 
 from __future__ import annotations
 
 import multiprocessing
+import os
 from collections.abc import Callable
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor, wait
 from dataclasses import dataclass
@@ -34,6 +35,7 @@ import cv2
 import numpy as np
 
 from eyehil.emulator.device.frames import ExposureRenderer, exposure_rng, render_exposure, render_region
+from eyehil.parallel import exit_with_parent
 
 MAX_RENDER_WORKERS = 8
 START_TIMEOUT_S = 120.0  # a process pool waits this long for its workers to import and start (a busy machine)
@@ -97,13 +99,15 @@ def render_job(renderer: ExposureRenderer, job: RenderJob) -> Rendered:
     return Rendered(image, tuple(int(v) for v in frame.roi_xy), encoded)
 
 
-def _init_worker(renderer: ExposureRenderer, setup: Callable[[], None] | None = None) -> None:
+def _init_worker(renderer: ExposureRenderer, setup: Callable[[], None] | None = None, parent: int | None = None
+                 ) -> None:
     global _WORKER_RENDERER
     _WORKER_RENDERER = renderer
     # One OpenCV thread: the pool is the parallelism. OpenCV's own pool (one thread per core) made each small
     # blur wake threads that fought the device's process for the two cores: 640 x 480 frames over ZeroMQ went
     # from 127-142 to 193-197 of 200 per second (python -m bench zmq, idle, 2 cores).
     cv2.setNumThreads(1)
+    exit_with_parent(parent)  # a killed device leaves no render process behind
     if setup is not None:
         setup()
 
@@ -135,7 +139,7 @@ class RenderPool:
         self._executor: Executor | None = None
         if workers and kind == "process":
             self._executor = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                                                 initializer=_init_worker, initargs=(renderer, setup))
+                                                 initializer=_init_worker, initargs=(renderer, setup, os.getpid()))
             warm = [self._executor.submit(_ready) for _ in range(workers)]  # start the workers now
             done, _ = wait(warm, timeout=START_TIMEOUT_S)
             if len(done) < workers or not all(f.result() for f in done):
