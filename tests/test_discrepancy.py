@@ -387,3 +387,20 @@ def test_cli_writes_the_report_and_reports_progress(tmp_path, capsys) -> None:
     main(["discrepancy", "--hidden", "head_roll=4", "--search-eyes", "3", "--eyes", "3", "--hidden-eyes", "3",
           "--effects", "head_roll", "--rounds", "1", "--workers", "1", "--quiet", "--out", str(out)])
     assert capsys.readouterr().err == ""
+
+
+def test_blind_trials_score_a_pair_in_the_order_of_each_effect_alone(hidden_eyes) -> None:
+    from eyehil.analysis.discrepancy.trials import score, sizes
+
+    big, small = effects.parse("pupil_change=-1.2"), effects.parse("feature_noise=0.02")
+    order = sizes([small, big], hidden_eyes, "guestrin2006", None, 5, published_eyes()[:SEARCH_EYES], 0)
+    assert order == ["pupil_change", "feature_noise"]
+
+    class Result:
+        shrink, added = 0.9, [big, small]
+
+    record = {"named_effects": order, "hidden_order": order, "outcome": "explained", "parameters": {}}
+    assert score(record, Result, [small, big]) | {"shrink": 0} == {"shrink": 0, "named_both": True, "in_order": True,
+                                                                   "added_nothing": False, "covered": []}
+    swapped = score({**record, "named_effects": order[::-1]}, Result, [small, big])
+    assert swapped["named_both"] and not swapped["in_order"]

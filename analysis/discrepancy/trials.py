@@ -6,12 +6,14 @@ workflow blind on the first `search_eyes` published eyes (show: the first `show_
 
 - single: one effect of the catalogue (every effect in turn, cycling), strength drawn uniformly between
   `LOW` and `HIGH` of the way from its neutral value to a bound of its plausible range (random side);
-- pair: two different effects, each drawn so; the larger is the one whose D alone is larger;
+- pair: two different effects, each drawn so; the larger is the one that opens the larger gap alone (`sizes`:
+  D of data with that effect alone, simulated on the same hidden eyes, against the search eyes' model
+  without effects);
 - negative: nothing hidden;
 - outside: one effect hidden and removed from the catalogue the workflow may use.
 
-Scores per trial (`score`): named (the hidden effect is the first named, outcome "explained"), in order
-(pairs: both named, in the order of their D alone), nothing added (negatives), "none explains"
+Scores per trial (`score`): named (the hidden effect is the first named, outcome "explained"), both named and
+in order (pairs: both named; and in the order of their sizes), nothing added (negatives), "none explains"
 (outside), shrink (1 - D_after / D_before, show eyes), and whether each hidden parameter lies within
 the fit's 95 % interval (1.96 sigma). Results go to DIR/trials.json, one record per trial, and a summary.
 """
@@ -68,14 +70,30 @@ def trial(kind: str, index: int, *, experiment: str, search_eyes: int, show_eyes
         conditions = [*chosen.diagnostic_conditions(host), *feature_names(host.head_positions)]
     measured = hidden_measured(hidden, eyes=eyes, experiment=experiment, conditions=conditions,
                                seed=seed + 3 + index)
+    order = sizes(hidden, eyes, experiment, conditions, seed + 3 + index, published_eyes()[:search_eyes], seed) \
+        if len(hidden) == 2 else [a.effect.name for a in hidden]
     start = time.perf_counter()
     result = run_discrepancy(measured, eyes=published_eyes()[:show_eyes], search_eyes=published_eyes()[:search_eyes],
                              effect_names=allowed, rounds=2, seed=seed)
     record = {"kind": kind, "index": index, "experiment": experiment, "features": features,
-              "hidden": [a.label() for a in hidden],
+              "hidden": [a.label() for a in hidden], "hidden_order": order,
               "hidden_values": {a.effect.name: dict(a.values) for a in hidden}, "seconds": time.perf_counter() - start,
               **result.summary()}
     return {**record, **score(record, result, hidden)}
+
+
+def sizes(hidden, eyes, experiment: str, conditions, noise_seed: int, search_eyes, seed: int) -> list[str]:
+    """The hidden effects' names from the largest: by D of data with each alone (the same hidden eyes and noise
+    seed as the trial's data) against the model without effects on the search eyes."""
+    from eyehil.analysis.discrepancy.metrics import Evaluator
+    from eyehil.analysis.discrepancy.stats import compare
+    from eyehil.analysis.discrepancy.workflow import hidden_measured
+
+    base = Evaluator(experiment, search_eyes, seed=seed)
+    gaps = {a.effect.name: compare(base.base_metrics, hidden_measured([a], eyes=eyes, experiment=experiment,
+                                                                     conditions=conditions, seed=noise_seed),
+                                   base.experiment.reference, tests=False).D for a in hidden}
+    return sorted(gaps, key=lambda name: -gaps[name])
 
 
 def score(record: dict, result, hidden) -> dict:
@@ -83,8 +101,9 @@ def score(record: dict, result, hidden) -> dict:
     named = record["named_effects"]
     truth = [a.effect.name for a in hidden]
     out: dict = {"shrink": result.shrink}
-    if len(hidden) == 2:  # the larger: the one whose measured gap alone is larger is unknown here; use order
+    if len(hidden) == 2:
         out["named_both"] = sorted(named) == sorted(truth)
+        out["in_order"] = named == record["hidden_order"]
     elif hidden:
         out["named"] = bool(named) and named[0] == truth[0] and record["outcome"] == "explained"
     out["added_nothing"] = not result.added
@@ -121,8 +140,9 @@ def main(argv: list[str] | None = None) -> int:
                     hidden_eyes=args.hidden_eyes, seed=args.seed, features=args.features)
         with path.open("a", encoding="utf-8") as f:
             f.write(json.dumps(rec, default=float) + "\n")
-        print(json.dumps({k: rec[k] for k in ("kind", "index", "hidden", "outcome", "named_effects", "shrink",
-                                               "covered", "seconds") if k in rec}, default=float), flush=True)
+        print(json.dumps({k: rec[k] for k in ("kind", "index", "hidden", "outcome", "named_effects", "hidden_order",
+                                               "in_order", "shrink", "covered", "seconds") if k in rec},
+                         default=float), flush=True)
     return 0
 
 
