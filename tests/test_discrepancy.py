@@ -404,3 +404,17 @@ def test_blind_trials_score_a_pair_in_the_order_of_each_effect_alone(hidden_eyes
                                                                    "added_nothing": False, "covered": []}
     swapped = score({**record, "named_effects": order[::-1]}, Result, [small, big])
     assert swapped["named_both"] and not swapped["in_order"]
+
+
+def test_blignaut_conditions_include_the_features_of_recordings(hidden_eyes) -> None:
+    from eyehil.analysis.discrepancy.recording import feature_names
+    from eyehil.emulator.scene import load_scene
+
+    names = feature_names(load_scene("blignaut2014").head_positions)
+    conditions = ["C5", *names]
+    measured = hidden_measured([effects.parse("corneal_asphericity=0.5")], eyes=hidden_eyes[:4],
+                               experiment="blignaut2014", conditions=conditions, seed=5)
+    assert set(measured.conditions) == set(conditions)
+    plain = Evaluator("blignaut2014", hidden_eyes[:4], seed=5).base_metrics
+    shifted = [n for n in names if not np.allclose(measured.conditions[n].values, plain[n])]
+    assert any(n.startswith("gain_") for n in shifted)  # a flatter cornea changes how the pupil moves on the glints

@@ -9,7 +9,8 @@ An experiment turns features into per-eye conditions (degrees, one array (E,) pe
   size and shape per head position, referred to the central position).
 - blignaut2014 (scene `blignaut2014`, binocular, 135 targets, one head position): "C5" ... "C135", each
   eye's error under the configuration's best function (the model of lowest mean error over the simulated
-  eyes, as `eyehil.analysis.study.summary`), and "M<k>:<configuration>" for model k; no references.
+  eyes, as `eyehil.analysis.study.summary`), and "M<k>:<configuration>" for model k; and the right eye's
+  feature conditions at its one head position (no references).
 
 `Evaluator` simulates a fixed set of eyes with the base effects plus each point's extra effects (every
 point with the same Generator seed: common random numbers; a session that no extra effect can change is
@@ -102,7 +103,7 @@ class BlignautExperiment:
     scene = "blignaut2014"
 
     def reference(self, condition: str) -> str | None:
-        return None
+        return feature_reference(condition)
 
     def diagnostic_conditions(self, host: Scene) -> tuple[str, ...]:
         return CONFIGURATIONS
@@ -121,6 +122,7 @@ class BlignautExperiment:
         out = {c: errors[:, models.index(best[c]["model"]), i] for i, c in enumerate(CONFIGURATIONS)}
         for m, k in enumerate(models):
             out.update({f"M{k}:{c}": errors[:, m, i] for i, c in enumerate(CONFIGURATIONS)})
+        out.update(feature_conditions(features))  # the right eye's, as for Guestrin
         return out
 
 
