@@ -215,10 +215,11 @@ def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel
             progress.stage(f"round {i + 1}: the model with {current.added.effect.name}", 1)
             search = search.with_base(added)
             progress.advance(1)
-        if len(added) > 1:
-            added, fits = _backfit(initial, measured, added, fits, alpha, progress)
-            search = initial.with_base(added)
-        final = find(search, measured, alpha) if len(added) > 1 or done[-1].added is not None else done[-1].before
+        backfitted = len(added) > 1
+        if backfitted:
+            added, fits, search = _backfit(initial, search, measured, added, fits, alpha, progress)
+        # the last round's own comparison is the final model's unless that round or the backfit changed the model
+        final = find(search, measured, alpha) if backfitted or done[-1].added is not None else done[-1].before
         interactions = None
         if len(added) > 1:
             progress.stage("interactions of the added effects", 1)
@@ -291,23 +292,26 @@ def _round(search: Evaluator, measured: Measured, effect_names, alpha, progress,
     return Round(before, fits, best, _verdict(best, fits))
 
 
-def _backfit(initial: Evaluator, measured: Measured, added: list[Applied], fits: list[EffectFit], alpha: float,
-             progress: Progress) -> tuple[list[Applied], list[EffectFit]]:
+def _backfit(initial: Evaluator, search: Evaluator, measured: Measured, added: list[Applied],
+             fits: list[EffectFit], alpha: float, progress: Progress
+             ) -> tuple[list[Applied], list[EffectFit], Evaluator]:
     """Refit each added effect with the others in the model at their current values (one sweep, in the order
-    added). The first effect was fitted while the second's gap was still unexplained and took up part of it;
-    refitted with the second in the model it gives that part back. A refit replaces the effect's values only
-    where it lowers D with all added effects and ends inside the plausible range."""
+    added); `search` is the evaluator with all of `added` in its base. The first effect was fitted while the
+    second's gap was still unexplained and took up part of it; refitted with the second in the model it gives
+    that part back. A refit replaces the effect's values only where it lowers D with all added effects and ends
+    inside the plausible range. Returns the effects, their fits and the evaluator of the final model."""
     added, fits = list(added), list(fits)
     reference = initial.experiment.reference
-    current = compare(initial.with_base(added).base_metrics, measured, reference, alpha, tests=False).D
+    current = compare(search.base_metrics, measured, reference, alpha, tests=False).D
     progress.stage("backfitting the added effects", sum(max_evaluations(a.effect) for a in added))
+    changed = False
     for j, applied in enumerate(added):
         others = initial.with_base(added[:j] + added[j + 1:])
         before = compare(others.base_metrics, measured, reference, alpha, tests=False)
         [fit] = name_effects(others, measured, before, [applied.effect.name], alpha, progress)
         if current > fit.D and not fit.at_edge:
-            added[j], fits[j], current = fit.applied, fit, fit.D
-    return added, fits
+            added[j], fits[j], current, changed = fit.applied, fit, fit.D, True
+    return added, fits, initial.with_base(added) if changed else search
 
 
 def _verdict(best: EffectFit | None, fits: list[EffectFit]) -> str:

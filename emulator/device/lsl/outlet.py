@@ -11,8 +11,8 @@ Network exposure (`bind`): "loopback" (the default, as every eyehil server) keep
 discovery on 127.0.0.1 (`library.LOOPBACK_CONFIG`) and, through the loopback bind library preloaded into the
 outlet process (`loopback`), liblsl's data (TCP) and time (UDP) ports on 127.0.0.1 too. "all" leaves liblsl to
 its defaults (or the user's LSLAPICFG): every interface. Where the library cannot be built (no C compiler, not
-Linux) the outlet still runs and says that its data and time ports listen on all interfaces. At start the
-outlet prints what its process listens on, read from /proc (`sockets`).
+Linux) the outlet still runs and its start-up line says which of its sockets other machines can reach, and why.
+At start the outlet prints what its process listens on, read from /proc (`sockets`).
 
 Timestamps are explicit: each sample carries its exposure's mid-exposure time, mapped from the device clock
 to LSL's `local_clock` at the push: t_lsl = local_clock() - (device now - t_exposure) / speed (the clock is
