@@ -111,12 +111,19 @@ class Truth:
 
 @dataclass(frozen=True, eq=False)
 class Frame:
-    """An 8-bit image (H, W) whose top-left pixel is sensor pixel `roi_xy`, and its ground truth."""
+    """An 8-bit image (H, W) whose top-left pixel is sensor pixel `roi_xy`, and its ground truth (`truth`,
+    computed from the drawn `outline` when first asked for: a streaming device never asks, and it cost a tenth
+    of a 640 x 480 frame)."""
 
     image: np.ndarray
     roi_xy: tuple[int, int]
-    truth: Truth
+    outline: EyeOutline  # the eyes drawn, shape (n,)
     sensor_px: tuple[int, int]
+
+    @functools.cached_property
+    def truth(self) -> Truth:
+        """Ground truth of the eyes drawn in this window."""
+        return ground_truth(self.outline, self.roi_xy, self.image.shape[::-1])
 
 
 def roi_window(centre_px: np.ndarray, size: tuple[int, int], sensor_px: tuple[int, int]) -> tuple[int, int]:
@@ -172,7 +179,7 @@ def render_window(outline: EyeOutline, rng: np.random.Generator, *, origin: tupl
     for box in boxes:
         _blur(canvas, box, settings.sensor.blur_sigma_px)
     image = expose(canvas, settings.sensor, rng, flat=(levels.skin, boxes))
-    return Frame(image=image, roi_xy=origin, truth=truth(outline, origin, size), sensor_px=outline.sensor_px)
+    return Frame(image=image, roi_xy=origin, outline=outline, sensor_px=outline.sensor_px)
 
 
 def _blur(canvas: np.ndarray, box: Box | None, sigma: float) -> None:
@@ -263,7 +270,7 @@ def _scratch(shape: tuple[int, ...]) -> list[np.ndarray]:
     return cache[shape]
 
 
-def truth(outline: EyeOutline, origin: tuple[int, int], size: tuple[int, int]) -> Truth:
+def ground_truth(outline: EyeOutline, origin: tuple[int, int], size: tuple[int, int]) -> Truth:
     """Ground truth of the eyes `outline` (n,) in the window at `origin` of `size`."""
     n, n_points = outline.shape[0], outline.pupil_points_px.shape[-2]
     seen_pupil, lid_glints = np.zeros(n), np.zeros(outline.glint_valid.shape)

@@ -13,9 +13,11 @@ from eyehil.emulator.device.clock import FastClock
 from eyehil.emulator.device.pupil.calibration import MAX_TARGETS, Session, fit, norm_to_screen, screen_to_norm
 from eyehil.emulator.device.pupil.capture import Capture
 from eyehil.emulator.device.pupil.datums import EyeWindow, PupilTime, exposure_datums, eye_windows
+from eyehil.emulator.device.pupil.eye3d import EyeModel3d, pupil_3d_datums
 from eyehil.emulator.device.pupil.frames import encode_image
 from eyehil.emulator.scene import load_scene
 from eyehil.protocols.enums import Eye
+from eyehil.protocols.pupil import PupilMessageError, pack
 
 GUESTRIN_SCREEN = (377.0, 301.0)
 
@@ -57,6 +59,26 @@ def test_datums_are_in_the_eye_image(subject) -> None:
     assert glint["glints"] == pupil["glints"] and glint["topic"] == "glint.0"
     full = eye_windows(subject.solver, (0,), None)
     assert full == [EyeWindow(0, 0, 0, 640, 480)]
+
+
+def test_datums_built_unchecked_pass_the_key_check(subject) -> None:
+    """The facade packs its exposure datums without walking their keys (`pack(check_keys=False)`): every one of
+    them must pass that walk, and the walk must still refuse a non-string key."""
+    windows = eye_windows(subject.solver, (0,), (320, 240))
+    camera = Camera(subject, (640, 480), (Eye.RIGHT,))
+    camera.start(0, 250, Selection((Eye.RIGHT,), 2))
+    exp = camera.take(5)
+    datums_2d = [exposure_datums(exp, n, windows, PupilTime(FastClock())) for n in range(len(exp))]
+    found = np.array([[d["confidence"] > 0 for d in datums[0::2]] for datums in datums_2d])
+    assert found.all()
+    datums_3d = pupil_3d_datums(exp.batch.centre, found, EyeModel3d.of(subject.solver), windows,
+                                [datums[0::2] for datums in datums_2d])
+    built = [d for datums in datums_2d + datums_3d for d in datums]
+    assert {d["topic"] for d in built} == {"pupil.0.2d", "glint.0", "pupil.0.3d"}
+    for d in built:
+        assert pack(d) == pack(d, check_keys=False)
+    with pytest.raises(PupilMessageError, match="not a string"):
+        pack({"topic": "pupil.0.3d", "sphere": {"center": [0.0], 1: 2}})
 
 
 def _session_with_targets(subject, targets_mm: np.ndarray, settle_s: float = 0.1) -> Session:

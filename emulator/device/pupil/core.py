@@ -134,15 +134,16 @@ class DeviceThread:
             return
         self._publish(self.capture.on_message(topic, payload))
 
-    def _publish(self, payloads: list[dict[str, Any]]) -> None:
+    def _publish(self, payloads: list[dict[str, Any]], built: bool = False) -> None:
         """Publish, each payload with its topic's sequence number `seq` (0, 1, 2 ... per topic; an extra key
         Pupil clients ignore, so that a subscriber tells skipped from dropped); pupil and gaze datums also go to
-        a recording under way (`Capture.record`; notifications come back through the SUB and are recorded there)."""
+        a recording under way (`Capture.record`; notifications come back through the SUB and are recorded there).
+        `built`: the datums of exposures, built here from literal keys, so their keys go unchecked (`pack`)."""
         for payload in payloads:
             topic = payload["topic"]
             payload["seq"] = self._seq[topic]
             self._seq[topic] += 1
-            frames = pack(payload)
+            frames = pack(payload, check_keys=not built)
             self._pub.send_multipart(frames)
             if topic.startswith(RECORDED):
                 self.capture.record(topic, frames[1], payload.get("timestamp"))
@@ -166,8 +167,8 @@ class DeviceThread:
         datums_3d = pupil_3d_datums(exp.batch.centre, found, self.eye3d, self.windows,
                                     [datums[0::2] for datums in datums_2d])
         for n in range(len(exp)):
-            self._publish(datums_2d[n])
-            self._publish(datums_3d[n])
+            self._publish(datums_2d[n], built=True)
+            self._publish(datums_3d[n], built=True)
             pupils.append(datums_2d[n][0::2])
             pupils_3d.append(datums_3d[n])
             self._offer_frame(exp, n)

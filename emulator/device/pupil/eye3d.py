@@ -18,6 +18,7 @@ phi = atan2(n_z, n_x) of the circle normal n (camera frame).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -58,7 +59,7 @@ class EyeModel3d:
         """Pupil centres (N, E, 3) scene mm and unit normals (N, E, 3) scene frame, from image centres
         (N, E, 2) px (NaN where the ray misses the sphere or the centre is NaN)."""
         uv1 = np.concatenate([centre_px, np.ones((*centre_px.shape[:-1], 1))], axis=-1)
-        d = uv1 @ np.linalg.inv(self.K).T @ self.R  # world directions (rows: R^T K^-1 uv1)
+        d = uv1 @ self._rays  # world directions (rows: R^T K^-1 uv1)
         d = d / np.linalg.norm(d, axis=-1, keepdims=True)
         oc = self.o - self.centres  # (E, 3)
         b = np.sum(d * oc, axis=-1)
@@ -68,6 +69,19 @@ class EyeModel3d:
         p = self.o + t[..., None] * d
         n = (p - self.centres) / self.radii[:, None]
         return p, n
+
+    @cached_property
+    def _rays(self) -> np.ndarray:
+        """(K^-1)^T R: image (u, v, 1) rows to scene directions (computed once; the facade asks 1,000 times a s)."""
+        return np.linalg.inv(self.K).T @ self.R
+
+    @cached_property
+    def spheres(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The eyeball spheres as the camera sees them: centres (E, 3) camera frame mm, centres (E, 2) full-sensor
+        px and projected diameters (E,) px."""
+        sphere_cam = self.to_camera(self.centres)
+        proj = sphere_cam @ self.K.T
+        return sphere_cam, proj[:, :2] / proj[:, 2:3], 2.0 * self.radii * self.K[0, 0] / sphere_cam[:, 2]
 
     def to_camera(self, v: np.ndarray, point: bool = True) -> np.ndarray:
         """Scene points (or directions, `point` False) (..., 3) in the camera frame."""
@@ -85,12 +99,9 @@ def pupil_3d_datums(exp_centre_px: np.ndarray, found: np.ndarray, model: EyeMode
     detection (N, E) and their 2-D datums (whose image fields they share)."""
     p, n = model.pupils(np.where(found[..., None], exp_centre_px, np.nan))
     ok = found & np.isfinite(n).all(-1)
-    sphere_cam = model.to_camera(model.centres)  # (E, 3)
+    sphere_cam, sphere_px, sphere_axes = model.spheres  # (E, 3), (E, 2) full sensor, (E,)
     circle_cam, normal_cam = model.to_camera(p), model.to_camera(n, point=False)
     theta, phi = angles(normal_cam)
-    proj = sphere_cam @ model.K.T
-    sphere_px = proj[:, :2] / proj[:, 2:3]  # full sensor
-    sphere_axes = 2.0 * model.radii * model.K[0, 0] / sphere_cam[:, 2]
     out = []
     for i, datums in enumerate(pupil_2d):
         row = []
