@@ -50,7 +50,7 @@ def test_datums_are_in_the_eye_image(subject) -> None:
     camera = Camera(subject, (640, 480), (Eye.RIGHT,))
     camera.start(0, 250, Selection((Eye.RIGHT,), 2))
     exp = camera.take(3)
-    pupil, glint = exposure_datums(exp, 1, windows, PupilTime(FastClock()))
+    pupil, glint = exposure_datums(exp, windows, PupilTime(FastClock()))[1]
     sensor_xy = exp.batch.centre[1, 0]
     assert pupil["ellipse"]["center"] == pytest.approx(sensor_xy - windows[0].origin)
     x, y = pupil["ellipse"]["center"]
@@ -68,7 +68,7 @@ def test_datums_built_unchecked_pass_the_key_check(subject) -> None:
     camera = Camera(subject, (640, 480), (Eye.RIGHT,))
     camera.start(0, 250, Selection((Eye.RIGHT,), 2))
     exp = camera.take(5)
-    datums_2d = [exposure_datums(exp, n, windows, PupilTime(FastClock())) for n in range(len(exp))]
+    datums_2d = exposure_datums(exp, windows, PupilTime(FastClock()))
     found = np.array([[d["confidence"] > 0 for d in datums[0::2]] for datums in datums_2d])
     assert found.all()
     datums_3d = pupil_3d_datums(exp.batch.centre, found, EyeModel3d.of(subject.solver), windows,
@@ -155,7 +155,7 @@ def test_a_pupil_off_its_window_has_no_confidence(subject) -> None:
     camera.start(0, 250, Selection((Eye.RIGHT,), 2))
     exp = camera.take(1)
     far = [EyeWindow(0, 500, 400, 100, 50)]
-    pupil = exposure_datums(exp, 0, far, PupilTime(FastClock()))[0]
+    pupil = exposure_datums(exp, far, PupilTime(FastClock()))[0][0]
     assert pupil["confidence"] == 0.0 and pupil["ellipse"]["center"] == [0.0, 0.0] and pupil["diameter"] == 0.0
     assert far[0].contains(np.array([500.0, 400.0])) and not far[0].contains(np.array([600.0, 400.0]))
 

@@ -3,9 +3,10 @@
 One thread ("eyehil-zmq-publisher") owns the camera (`eyehil.emulator.device.camera`), the subject's plan, the
 `zmq_capture.Capture` state and two sockets: a PUB connected to the backbone's XSUB (everything this thread
 publishes) and a SUB connected to its XPUB, subscribed to ``notify.`` and ``annotation`` (notifications and
-annotations from Pupil Remote and from clients publishing directly). It wakes at each exposure's
-mid-exposure time (device clock; waits under a millisecond use an event's timeout, not the socket poll) and
-whenever a message arrives, and per exposure publishes ``pupil.<id>.2d`` and ``glint.<id>`` of every tracked
+annotations from Pupil Remote and from clients publishing directly). It wakes at the mid-exposure time of
+each group of exposures due within `GROUP_S` (device clock: one exposure below 500 Hz, two at 1 kHz; waits
+under a millisecond use an event's timeout, not the socket poll) and whenever a message arrives, and per
+exposure publishes ``pupil.<id>.2d`` and ``glint.<id>`` of every tracked
 eye (`zmq_datums`), hands every k-th exposure to the frame thread (`zmq_frames`) and every k_w-th, with the
 target then on the screen (`world.TargetTrack`), to the world thread (`pupil/world.py`), and queues it for gaze
 mapping (`zmq_gaze`) and the LSL outlet. Falling more than `MAX_BEHIND_S` behind, it skips the excess
@@ -37,6 +38,7 @@ from eyehil.protocols.enums import Eye
 from eyehil.protocols.pupil import PupilMessageError, pack, unpack
 
 MAX_BEHIND_S = 0.25
+GROUP_S = 0.002  # exposures due within this long are published together (s): at most 1 ms more latency at 1 kHz
 IDLE_S = 0.05
 DRAIN = 256  # messages handled per wake-up at most
 RECORDED = ("pupil.", "gaze.")  # what the device publishes that a recording keeps (notifications come back)
@@ -106,8 +108,11 @@ class DeviceThread:
             self._sub.close(linger=0)
 
     def _wait_s(self) -> float:
-        """Wall seconds until the next exposure is due (at most `IDLE_S`; less while a fit or gaze waits)."""
-        due_us = self.camera.time_of(self.camera.taken)
+        """Wall seconds until the next group of exposures is due (at most `IDLE_S`; less while a fit or gaze
+        waits): the exposures due within `GROUP_S` go out together (at 1 kHz in pairs, below 500 Hz one by one),
+        which spares the thread a wake-up per exposure."""
+        group = max(1, int(self.rate_hz * GROUP_S))
+        due_us = self.camera.time_of(self.camera.taken + group - 1)
         wait = min(IDLE_S, self.clock.wall_delay_s(due_us))
         return min(wait, BATCH_S) if self.capture.gazer is not None or self.outlet is not None else wait
 
@@ -162,7 +167,7 @@ class DeviceThread:
             return
         exp = self.camera.take(due)
         pupils, pupils_3d = [], []
-        datums_2d = [exposure_datums(exp, n, self.windows, self.time) for n in range(len(exp))]
+        datums_2d = exposure_datums(exp, self.windows, self.time)
         found = np.array([[d["confidence"] > 0 for d in datums[0::2]] for datums in datums_2d])
         datums_3d = pupil_3d_datums(exp.batch.centre, found, self.eye3d, self.windows,
                                     [datums[0::2] for datums in datums_2d])

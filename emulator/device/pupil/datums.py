@@ -106,26 +106,33 @@ def eye_windows(solver: FeatureSolver, eye_ids: tuple[int, ...], size: tuple[int
     return windows
 
 
-def _glints(exp: Exposures, n: int, e: int, origin: np.ndarray) -> list[dict[str, Any]]:
+def exposure_datums(exp: Exposures, windows: list[EyeWindow], time: PupilTime) -> list[list[dict[str, Any]]]:
+    """Per exposure of `exp`, the `pupil.<id>.2d` and `glint.<id>` datums of each eye (in window order: pupil,
+    glint, pupil, glint ...). The arrays of the whole batch are converted to Python numbers once: the facade
+    builds 2,000 such datums a second."""
     b = exp.batch
-    valid = (b.glint_flags[n, e] & GlintFlags.VALID) != 0
-    xy = np.where(valid[:, None], b.glint_xy[n, e] - origin, 0.0)
-    return [glint_entry(int(led), xy[g], bool(valid[g])) for g, led in enumerate(b.glint_led[n, e])]
-
-
-def exposure_datums(exp: Exposures, n: int, windows: list[EyeWindow], time: PupilTime) -> list[dict[str, Any]]:
-    """The `pupil.<id>.2d` and `glint.<id>` datums of exposure `n` of `exp` (eyes in window order)."""
-    b = exp.batch
-    ts = float(time.of_us(int(exp.time_us[n])))
-    out = []
+    ts = np.asarray(time.of_us(exp.time_us), float).tolist()
+    per_eye = []
     for e, win in enumerate(windows):
-        found = bool(b.flags[n, e] & PupilFlags.DETECTED) and win.contains(b.centre[n, e])
-        glints = _glints(exp, n, e, win.origin)
-        centre = b.centre[n, e] - win.origin if found else np.zeros(2)
-        axes = b.axes[n, e] if found else np.zeros(2)
-        out.append(pupil_datum(win.eye_id, ts, centre, axes, float(b.angle_deg[n, e]) if found else 0.0,
-                               float(b.confidence[n, e]) if found else 0.0, win.size, glints))
-        out.append(glint_datum(win.eye_id, ts, glints))
+        origin = win.origin
+        xy = b.centre[:, e] - origin  # (N, 2) window px
+        found = (((b.flags[:, e] & PupilFlags.DETECTED) != 0) & (xy[:, 0] >= -0.5) & (xy[:, 0] < win.width - 0.5)
+                 & (xy[:, 1] >= -0.5) & (xy[:, 1] < win.height - 0.5))
+        valid = (b.glint_flags[:, e] & GlintFlags.VALID) != 0  # (N, G)
+        glint_xy = np.where(valid[..., None], b.glint_xy[:, e] - origin, 0.0)
+        per_eye.append((win, np.where(found[:, None], xy, 0.0).tolist(),
+                        np.where(found[:, None], b.axes[:, e], 0.0).tolist(),
+                        np.where(found, b.angle_deg[:, e], 0.0).tolist(),
+                        np.where(found, b.confidence[:, e], 0.0).tolist(),
+                        glint_xy.tolist(), valid.tolist(), b.glint_led[:, e].tolist()))
+    out = []
+    for n, t in enumerate(ts):
+        datums = []
+        for win, xy, axes, angle, confidence, glint_xy, valid, leds in per_eye:
+            glints = [glint_entry(led, g, ok) for led, g, ok in zip(leds[n], glint_xy[n], valid[n], strict=True)]
+            datums.append(pupil_datum(win.eye_id, t, xy[n], axes[n], angle[n], confidence[n], win.size, glints))
+            datums.append(glint_datum(win.eye_id, t, glints))
+        out.append(datums)
     return out
 
 

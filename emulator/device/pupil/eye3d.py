@@ -102,17 +102,20 @@ def pupil_3d_datums(exp_centre_px: np.ndarray, found: np.ndarray, model: EyeMode
     sphere_cam, sphere_px, sphere_axes = model.spheres  # (E, 3), (E, 2) full sensor, (E,)
     circle_cam, normal_cam = model.to_camera(p), model.to_camera(n, point=False)
     theta, phi = angles(normal_cam)
+    # Python numbers, converted once for the batch (zeros where the pupil was not found)
+    okv = ok[..., None]
+    circle_l, normal_l = np.where(okv, circle_cam, 0.0).tolist(), np.where(okv, normal_cam, 0.0).tolist()
+    theta_l, phi_l, ok_l = np.where(ok, theta, 0.0).tolist(), np.where(ok, phi, 0.0).tolist(), ok.tolist()
+    spheres = [(sphere_cam[e].tolist(), float(model.radii[e]), (sphere_px[e] - windows[e].origin).tolist(),
+                float(sphere_axes[e])) for e in range(len(windows))]
+    radius, diameter = model.pupil_mm / 2, model.pupil_mm
     out = []
     for i, datums in enumerate(pupil_2d):
         row = []
         for e, d2 in enumerate(datums):
-            good = bool(ok[i, e])
-            centre_px = sphere_px[e] - windows[e].origin
-            row.append(pupil_3d_datum(d2, sphere_cam[e], float(model.radii[e]), centre_px, float(sphere_axes[e]),
-                                      circle_cam[i, e] if good else np.zeros(3),
-                                      normal_cam[i, e] if good else np.zeros(3),
-                                      model.pupil_mm / 2 if good else 0.0, model.pupil_mm if good else 0.0,
-                                      float(theta[i, e]) if good else 0.0, float(phi[i, e]) if good else 0.0,
+            good = ok_l[i][e]
+            row.append(pupil_3d_datum(d2, *spheres[e], circle_l[i][e], normal_l[i][e], radius if good else 0.0,
+                                      diameter if good else 0.0, theta_l[i][e], phi_l[i][e],
                                       d2["confidence"] if good else 0.0))
         out.append(row)
     return out
