@@ -10,7 +10,7 @@ import pytest
 from eyehil.emulator.eye.normative import normative_eye
 from eyehil.emulator.eye.published import published_eyes
 from eyehil.emulator.forward import Poses, simulate
-from eyehil.emulator.render.geometry import eye_outlines, pupil_polar
+from eyehil.emulator.render.geometry import _upsampler, eye_outlines, pupil_polar
 from eyehil.emulator.render.renderer import (
     Appearance,
     RenderSettings,
@@ -42,6 +42,24 @@ def test_fourier_outline_reproduces_an_ellipse_exactly():
     u, v = np.cos(theta - phi), np.sin(theta - phi)
     np.testing.assert_allclose(r, 1.0 / np.sqrt((u / a) ** 2 + (v / b) ** 2), rtol=1e-9)
     assert np.all(np.diff(theta) > 0)
+
+
+@pytest.mark.parametrize("n", [29, 30])
+def test_outline_interpolation_matrix_is_the_fft_interpolant(n):
+    """`pupil_polar`'s real matrix equals zero-padded FFT interpolation (Nyquist term split for even n) and
+    passes through the samples."""
+    z = np.random.default_rng(n).normal(size=n) + 1j * np.random.default_rng(n + 1).normal(size=n)
+    m = 4 * n
+    spec = np.fft.fft(z)
+    padded = np.zeros(m, complex)
+    h = (n + 1) // 2
+    padded[:h], padded[m - (n - h):] = spec[:h], spec[h:]
+    if n % 2 == 0:
+        padded[n // 2] = padded[m - n // 2] = spec[n // 2] / 2
+    expected = np.fft.ifft(padded) * (m / n)
+    matrix = _upsampler(n, m)
+    np.testing.assert_allclose(z.real @ matrix + 1j * (z.imag @ matrix), expected, atol=1e-12)
+    np.testing.assert_allclose(z.real @ matrix[:, ::4], z.real, atol=1e-12)
 
 
 def test_limbus_is_the_projected_corneal_edge(guestrin):

@@ -33,6 +33,7 @@ Known answer: with blink 1 the upper and lower margins coincide point for point.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -184,34 +185,46 @@ def _margin(lids: Eyelids, height: np.ndarray) -> np.ndarray:
 
 def pupil_polar(points: np.ndarray, valid: np.ndarray, centre: np.ndarray, axes: np.ndarray, angle_deg: np.ndarray,
                 m: int = POLAR_SAMPLES) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Polar tables (theta, r, dr/dtheta), each (..., m), of the pupil outline about `centre` (..., 2) px."""
-    dense = _fourier_upsample(points[..., 0] + 1j * points[..., 1], m)
+    """Polar tables (theta, r, dr/dtheta), each (..., m), of the pupil outline about `centre` (..., 2) px: the
+    trigonometric interpolation of the outline's evenly spaced points (..., n, 2) onto m angles, or the
+    ellipse (centre, full `axes`, `angle_deg`) where any point is not `valid` (..., n)."""
+    upsample = _upsampler(points.shape[-2], m)  # (n, m)
+    flat = np.nan_to_num(points)
+    x, y = flat[..., 0] @ upsample, flat[..., 1] @ upsample
     t = 2.0 * np.pi * np.arange(m) / m
     a, b, phi = axes[..., 0:1] / 2, axes[..., 1:2] / 2, np.radians(angle_deg)[..., None]
-    ellipse = (a * np.cos(t) + 1j * b * np.sin(t)) * np.exp(1j * phi) + (centre[..., 0:1] + 1j * centre[..., 1:2])
-    dense = np.where(np.all(valid, axis=-1, keepdims=True), dense, ellipse)
-    w = dense - (centre[..., 0:1] + 1j * centre[..., 1:2])
-    order = np.argsort(np.angle(np.nan_to_num(w)), axis=-1)
-    w = np.take_along_axis(w, order, axis=-1)
-    theta, r = np.angle(w), np.abs(w)
-    span = np.roll(theta, -1, axis=-1) - np.roll(theta, 1, axis=-1)
-    span = np.mod(span, 2.0 * np.pi)
-    dr = (np.roll(r, -1, axis=-1) - np.roll(r, 1, axis=-1)) / np.where(span > 0, span, np.inf)
+    ex, ey = a * np.cos(t), b * np.sin(t)
+    c, s = np.cos(phi), np.sin(phi)
+    traced = np.all(valid, axis=-1, keepdims=True)
+    dx = np.where(traced, x - centre[..., 0:1], ex * c - ey * s)
+    dy = np.where(traced, y - centre[..., 1:2], ex * s + ey * c)
+    theta = np.arctan2(np.nan_to_num(dy), np.nan_to_num(dx))
+    order = np.argsort(theta, axis=-1)
+    theta = np.take_along_axis(theta, order, axis=-1)
+    r = np.take_along_axis(np.hypot(dx, dy), order, axis=-1)
+    both = np.stack([theta, r])
+    step = np.roll(both, -1, axis=-1) - np.roll(both, 1, axis=-1)  # next - previous, around the outline
+    span = np.mod(step[0], 2.0 * np.pi)
+    dr = step[1] / np.where(span > 0, span, np.inf)
     return theta, r, dr
 
 
-def _fourier_upsample(z: np.ndarray, m: int) -> np.ndarray:
-    """Trigonometric interpolation of evenly spaced periodic samples z (..., n) onto m > n samples."""
-    n = z.shape[-1]
-    spec = np.fft.fft(np.nan_to_num(z), axis=-1)
-    out = np.zeros((*z.shape[:-1], m), dtype=complex)
+@functools.lru_cache(maxsize=8)
+def _upsampler(n: int, m: int) -> np.ndarray:
+    """The real matrix (n, m) of trigonometric interpolation of n evenly spaced periodic samples onto m > n: row
+    k is the interpolant of the k-th unit sample (FFT, zero-padded spectrum, the Nyquist term split between
+    +n/2 and -n/2, inverse FFT). A real operator: it maps x and y apart."""
+    spec = np.fft.fft(np.eye(n), axis=-1)
+    out = np.zeros((n, m), dtype=complex)
     h = (n + 1) // 2  # frequencies 0 .. h-1 and -(n-h) .. -1
-    out[..., :h] = spec[..., :h]
-    out[..., m - (n - h):] = spec[..., h:]
-    if n % 2 == 0:  # split the Nyquist term between +n/2 and -n/2
-        out[..., n // 2] = spec[..., n // 2] / 2
-        out[..., m - n // 2] = spec[..., n // 2] / 2
-    return np.fft.ifft(out, axis=-1) * (m / n)
+    out[:, :h] = spec[:, :h]
+    out[:, m - (n - h):] = spec[:, h:]
+    if n % 2 == 0:
+        out[:, n // 2] = spec[:, n // 2] / 2
+        out[:, m - n // 2] = spec[:, n // 2] / 2
+    matrix = np.fft.ifft(out, axis=-1).real * (m / n)
+    matrix.setflags(write=False)
+    return matrix
 
 
 def aperture_coverage(x: np.ndarray, y: np.ndarray, upper: np.ndarray, lower: np.ndarray) -> np.ndarray:
