@@ -97,7 +97,7 @@ def pack(payload: Mapping[str, Any], check_keys: bool = True) -> list[bytes]:
         packed = msgpack.packb(body, use_bin_type=True)
     except (TypeError, ValueError, OverflowError) as exc:
         raise PupilMessageError(f"payload cannot be packed: {exc}") from exc
-    raw = [bytes(memoryview(b)) for b in payload.get(RAW, ())]
+    raw = [b if type(b) is bytes else bytes(memoryview(b)) for b in payload.get(RAW, ())]  # bytes: no copy
     return [body["topic"].encode("utf-8"), packed, *raw]
 
 
