@@ -86,8 +86,11 @@ class FrameDecoder:
         events: list[FrameEvent] = []
         start = 0
         while (zero := view.find(0, start)) >= 0:
-            self._accumulate(view[start:zero], events)
-            self._finish(events)
+            if self._buf or self._skipping:
+                self._accumulate(view[start:zero], events)
+                self._finish(events)
+            elif zero > start:  # a whole frame inside `data`: decoded without passing through the buffer
+                self._whole(view[start:zero], events)
             start = zero + 1
         self._accumulate(view[start:], events)
         return events
@@ -109,24 +112,39 @@ class FrameDecoder:
             return
         if not self._buf:
             return
+        self._decode(bytes(self._buf), events)
+        self._buf.clear()
+
+    def _whole(self, encoded: bytes, events: list[FrameEvent]) -> None:
+        """Handle the non-empty bytes between two delimiters of one `feed`, as `_accumulate` then `_finish` would."""
+        if len(encoded) > self.max_encoded:
+            self._report(FaultKind.OVERSIZED, f"more than {self.max_encoded} encoded bytes", len(encoded), events)
+        else:
+            self._decode(encoded, events)
+
+    def _decode(self, encoded: bytes, events: list[FrameEvent]) -> None:
+        """Deliver the frame `encoded` holds, or report why not."""
         try:
-            frame = cobs.decode(self._buf)
+            frame = cobs.decode(encoded)
         except CobsDecodeError as exc:
-            self._fault(FaultKind.COBS, str(exc), events)
+            self._report(FaultKind.COBS, str(exc), len(encoded), events)
             return
         if len(frame) > self.max_frame:
-            self._fault(FaultKind.OVERSIZED, f"{len(frame)} decoded bytes > {self.max_frame}", events)
+            self._report(FaultKind.OVERSIZED, f"{len(frame)} decoded bytes > {self.max_frame}", len(encoded), events)
             return
-        self._buf.clear()
         self.frames += 1
         events.append(frame)
 
     def _fault(self, kind: FaultKind, detail: str, events: list[FrameEvent]) -> None:
         """Count and report a fault, dropping the buffered bytes."""
+        self._report(kind, detail, len(self._buf), events)
+        self._buf.clear()
+
+    def _report(self, kind: FaultKind, detail: str, discarded: int, events: list[FrameEvent]) -> None:
+        """Count and report a fault that discarded `discarded` bytes."""
         if kind is FaultKind.COBS:
             self.cobs_errors += 1
         else:
             self.oversized += 1
-        self.bytes_discarded += len(self._buf)
-        events.append(FramingFault(kind, detail, len(self._buf)))
-        self._buf.clear()
+        self.bytes_discarded += discarded
+        events.append(FramingFault(kind, detail, discarded))

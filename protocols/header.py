@@ -81,16 +81,16 @@ def pack_frame(msg_type: int, seq: int, timestamp_us: int, payload: bytes, versi
         head = HEADER.pack(MAGIC, version, msg_type, seq % SEQ_MODULUS, timestamp_us, len(payload))
     except struct.error as exc:
         raise ValueError(f"header field out of range: {exc}") from exc
-    body = head + bytes(payload)
-    return body + _CRC.pack(crc16(body))
+    payload = bytes(payload)
+    return b"".join((head, payload, _CRC.pack(crc16(payload, crc16(head)))))
+
+
+_TYPES: dict[int, MessageType] = {int(t): t for t in MessageType}
 
 
 def _known_type(number: int) -> int:
     """Return the `MessageType` member for `number`, or `number` itself if unknown."""
-    try:
-        return MessageType(number)
-    except ValueError:
-        return number
+    return _TYPES.get(number, number)
 
 
 def unpack_frame(frame: bytes, versions: frozenset[int] = SUPPORTED_VERSIONS) -> tuple[Header, bytes]:

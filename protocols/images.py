@@ -13,6 +13,7 @@ count), is refused and counted in ``refused``, before any allocation.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from operator import attrgetter
 
 import numpy as np
 
@@ -38,10 +39,8 @@ def split_image(
     count = max(1, -(-len(raw) // chunk_data))
     height, width = image.shape
     return [
-        FrameChunk(
-            frame_id, eye, fmt, width, height, *roi_xy, k, count, k * chunk_data, raw[k * chunk_data :][:chunk_data]
-        )
-        for k in range(count)
+        FrameChunk(frame_id, eye, fmt, width, height, *roi_xy, k, count, start, raw[start : start + chunk_data])
+        for k, start in enumerate(range(0, count * chunk_data, chunk_data))
     ]
 
 
@@ -115,7 +114,9 @@ class ImageAssembler:
         return Image(c.frame_id, c.eye, c.roi_x, c.roi_y, pixels)
 
 
+_GEOMETRY = attrgetter("pixel_format", "width", "height", "roi_x", "roi_y", "chunk_count")  # a chunk's image layout
+
+
 def _same_geometry(a: FrameChunk, b: FrameChunk) -> bool:
     """True if two chunks describe the same image layout."""
-    keys = ("pixel_format", "width", "height", "roi_x", "roi_y", "chunk_count")
-    return all(getattr(a, k) == getattr(b, k) for k in keys)
+    return _GEOMETRY(a) == _GEOMETRY(b)

@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
-from typing import ClassVar, Self
+from enum import IntEnum
+from typing import ClassVar, Self, TypeVar
 
 from eyehil.protocols.enums import Eye, GlintFlags, PixelFormat, PupilFlags
 from eyehil.protocols.errors import MalformedPayloadError
@@ -122,6 +123,19 @@ def _unpack_eye(payload: bytes, offset: int) -> tuple[EyeFeatures, int]:
     return EyeFeatures(*fields, glints=tuple(glints)), offset
 
 
+_E = TypeVar("_E", bound=IntEnum)
+_EYES: dict[int, Eye] = {int(e): e for e in Eye}
+_PIXEL_FORMATS: dict[int, PixelFormat] = {int(f): f for f in PixelFormat}
+
+
+def _member(enum: type[_E], members: dict[int, _E], value: object) -> _E:
+    """``enum(value)`` (raising its ValueError for unknown values), by a dict lookup for the known ones."""
+    try:
+        return members[value]  # type: ignore[index]
+    except (KeyError, TypeError):
+        return enum(value)
+
+
 @dataclass(frozen=True, slots=True)
 class FrameChunk:
     """device -> host: a piece of one camera image (the region of interest, or one eye's crop).
@@ -148,9 +162,12 @@ class FrameChunk:
 
     def __post_init__(self) -> None:
         """Coerce the enums and the data; check that the chunk lies inside its image."""
-        object.__setattr__(self, "eye", Eye(self.eye))
-        object.__setattr__(self, "pixel_format", PixelFormat(self.pixel_format))
-        object.__setattr__(self, "data", bytes(self.data))
+        if type(self.eye) is not Eye:  # (a frozen field costs a slow object.__setattr__: only when it changes)
+            object.__setattr__(self, "eye", _member(Eye, _EYES, self.eye))
+        if type(self.pixel_format) is not PixelFormat:
+            object.__setattr__(self, "pixel_format", _member(PixelFormat, _PIXEL_FORMATS, self.pixel_format))
+        if type(self.data) is not bytes:
+            object.__setattr__(self, "data", bytes(self.data))
         if not 0 <= self.chunk_index < self.chunk_count:
             raise ValueError(f"chunk index {self.chunk_index} not in 0..{self.chunk_count - 1}")
         if self.offset + len(self.data) > self.image_size:
@@ -164,9 +181,11 @@ class FrameChunk:
     def to_payload(self) -> bytes:
         """Encode the chunk header then the pixel bytes."""
         try:
-            return self.STRUCT.pack(*field_values(self)[:-1]) + self.data
+            head = self.STRUCT.pack(self.frame_id, self.eye, self.pixel_format, self.width, self.height, self.roi_x,
+                                    self.roi_y, self.chunk_index, self.chunk_count, self.offset)
         except struct.error as exc:
             raise ValueError(f"FrameChunk: {exc}") from exc
+        return head + self.data
 
     @classmethod
     def from_payload(cls, payload: bytes) -> Self:

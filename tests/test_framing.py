@@ -7,6 +7,8 @@ import itertools
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from eyehil.protocols import cobs
 from eyehil.protocols.crc import CRC16_CHECK, crc16, crc16_bitwise
@@ -72,6 +74,73 @@ def test_cobs_round_trip_random() -> None:
         assert 0 not in enc
         assert len(enc) <= cobs.max_encoded_size(n)
         assert cobs.decode(enc) == data
+
+
+def _cobs_edge_cases() -> list[bytes]:
+    """Lengths and zero placements where the fast paths change branch: empty, all zeros, runs of 253..255, 508,
+    509 and 64 * 254 (one decoded run) +- 1 non-zero bytes, alone, after or before a zero, and data ending in zeros."""
+    cases = [b"", b"\x00", b"\x00" * 2, bytes(254), bytes(1000)]
+    for n in (1, 253, 254, 255, 507, 508, 509, 64 * 254 - 1, 64 * 254, 64 * 254 + 1, 130 * 254):
+        run = bytes(1 + k % 255 for k in range(n))
+        cases += [run, run + b"\x00", b"\x00" + run, run + b"\x00" + run, run + b"\x00\x00", b"\x11\x00" + run]
+    return cases
+
+
+def _random_cobs_data(rng: np.random.Generator, count: int) -> list[bytes]:
+    """Random strings of 0..1800 bytes, their zero density from none to all (as often none: long runs)."""
+    out = []
+    for _ in range(count):
+        n = int(rng.integers(0, 1800))
+        zeros = rng.random() ** 3 if rng.random() < 0.7 else 0.0
+        out.append(np.where(rng.random(n) < zeros, 0, rng.integers(1, 256, n)).astype(np.uint8).tobytes())
+    return out
+
+
+def _decoded_or_error(decode, encoded: bytes) -> bytes | str:
+    """What a COBS decoder makes of `encoded`: the bytes, or its error's message."""
+    try:
+        return decode(encoded)
+    except CobsDecodeError as exc:
+        return f"error: {exc}"
+
+
+def test_cobs_fast_paths_give_the_references_bytes() -> None:
+    for data in _cobs_edge_cases() + _random_cobs_data(np.random.default_rng(5), 1500):
+        encoded = cobs.encode_reference(data)
+        assert cobs.encode(data) == encoded
+        assert cobs.encode(bytearray(data)) == cobs.encode(memoryview(data)) == encoded
+        assert cobs.decode(encoded) == cobs.decode_reference(encoded) == data
+        assert type(cobs.encode(data)) is bytes and type(cobs.decode(encoded)) is bytes
+
+
+def test_cobs_decoder_refuses_what_the_reference_refuses_with_the_same_message() -> None:
+    rng = np.random.default_rng(6)
+    bad = 0
+    for data in _cobs_edge_cases() + _random_cobs_data(rng, 600):
+        encoded = cobs.encode_reference(data)
+        for _ in range(4):  # overwrite a byte (sometimes with 0x00 or 0xFF), then maybe truncate
+            mutated = bytearray(encoded)
+            k = int(rng.integers(0, len(mutated)))
+            mutated[k] = int(rng.choice([0, 0xFF, int(rng.integers(1, 256))]))
+            if rng.random() < 0.5:
+                del mutated[int(rng.integers(1, len(mutated) + 1)) :]
+            expected = _decoded_or_error(cobs.decode_reference, bytes(mutated))
+            assert _decoded_or_error(cobs.decode, bytes(mutated)) == expected
+            bad += isinstance(expected, str)
+    for count in (1, 2, 63, 64, 65, 130):  # runs of 0xFF blocks, the last one truncated by 1 or 254 bytes
+        for short in (1, 254):
+            src = ((b"\xff" + bytes(range(1, 255))) * count)[:-short]
+            assert _decoded_or_error(cobs.decode, src) == _decoded_or_error(cobs.decode_reference, src)
+    assert bad > 500  # the mutations did reach the error paths
+
+
+@settings(max_examples=300, deadline=None)
+@given(data=st.binary(max_size=2000))
+def test_cobs_fast_paths_match_the_reference_property(data: bytes) -> None:
+    encoded = cobs.encode(data)
+    assert encoded == cobs.encode_reference(data)
+    assert cobs.decode(encoded) == data
+    assert _decoded_or_error(cobs.decode, data) == _decoded_or_error(cobs.decode_reference, data)
 
 
 @pytest.mark.parametrize("bad", ["", "00", "05 11 22", "03 11 00", "02 11 00 01"])
@@ -187,3 +256,37 @@ def test_reset_forgets_the_partial_frame() -> None:
     decoder.reset()
     assert decoder.pending == 0
     assert decoder.feed(encode_frame(b"whole")) == [b"whole"]
+
+
+def _counters(decoder: FrameDecoder) -> tuple[int, int, int, int, int]:
+    return decoder.frames, decoder.cobs_errors, decoder.oversized, decoder.bytes_discarded, decoder.pending
+
+
+class _BufferedOnly(FrameDecoder):
+    """The decoder without its fast path: every frame passes through the buffer (as before the fast path)."""
+
+    def _whole(self, encoded: bytes, events: list) -> None:
+        self._accumulate(encoded, events)
+        self._finish(events)
+
+
+def test_whole_frames_in_one_feed_give_the_events_of_the_buffered_path() -> None:
+    """Frames wholly inside one `feed` skip the buffer; events and counters are those of the buffered path."""
+    rng = np.random.default_rng(7)
+    pieces = [encode_frame(f) for f in _frames(rng, 40)]
+    pieces += [b"\x05\x11\x00", b"\x03\x11", b"\x00", b"\x01" * (MAX_ENCODED_SIZE + 1) + b"\x00"]  # COBS, too long
+    pieces += [b"\x00" * 3, encode_frame(bytes(MAX_FRAME_SIZE)), b"\xff" * 300 + b"\x00"]  # largest, truncated run
+    pieces += [cobs.encode(bytes(40)) + b"\x00", rng.integers(0, 256, 5000, dtype=np.uint8).tobytes()]  # garbage
+    order = rng.permutation(len(pieces))
+    stream = b"".join(pieces[k] for k in order) + b"\x00" + encode_frame(b"last") + b"\x07\x01"  # a partial frame
+    for max_frame in (MAX_FRAME_SIZE, 30):  # 30: valid COBS that decodes too long is the other oversized fault
+        fast, buffered = FrameDecoder(max_frame), _BufferedOnly(max_frame)
+        expected = buffered.feed(stream)
+        assert fast.feed(stream) == expected and _counters(fast) == _counters(buffered)
+        kinds = {e.kind for e in expected if isinstance(e, FramingFault)}
+        assert kinds == {FaultKind.COBS, FaultKind.OVERSIZED} and expected[-1] == b"last" and fast.pending == 2
+        for trial in range(3):  # the same stream cut at random places
+            fast, buffered = FrameDecoder(max_frame), _BufferedOnly(max_frame)
+            cut = _feed_in_pieces(fast, stream, np.random.default_rng(trial))
+            assert cut == _feed_in_pieces(buffered, stream, np.random.default_rng(trial))
+            assert _counters(fast) == _counters(buffered) and cut[-1] == b"last"

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -103,3 +105,39 @@ def test_assembler_drops_an_incomplete_image_when_the_next_starts() -> None:
 def test_frame_chunk_must_lie_inside_its_image() -> None:
     with pytest.raises(ValueError):
         FrameChunk(1, Eye.LEFT, 1, 2, 2, 0, 0, 0, 1, 2, b"abc")
+
+
+def _split_reference(frame_id: int, eye: Eye, image: np.ndarray, roi_xy: tuple[int, int], chunk_data: int) -> list:
+    """The chunks of `image` cut one by one from its little-endian bytes (what `split_image` must return)."""
+    raw = image.astype(image.dtype.newbyteorder("<")).tobytes()
+    count = max(1, -(-len(raw) // chunk_data))
+    fmt = 1 if image.dtype.itemsize == 1 else 2
+    return [FrameChunk(frame_id, eye, fmt, image.shape[1], image.shape[0], *roi_xy, k, count, k * chunk_data,
+                       raw[k * chunk_data : (k + 1) * chunk_data]) for k in range(count)]  # fmt: skip
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.dtype("<u2"), np.dtype(">u2")])
+def test_split_image_matches_the_chunk_by_chunk_reference(dtype: np.dtype) -> None:
+    rng = np.random.default_rng(13)
+    cases = [((240, 320), MAX_CHUNK_DATA), ((1, 1), MAX_CHUNK_DATA), ((0, 5), MAX_CHUNK_DATA), ((7, 582), 4074),
+             ((7, 582), 582), ((97, 42), 4073), ((240, 320), 1000), ((3, 5), 1), ((9, 11), 7), ((50, 2), 100)]
+    for shape, chunk_data in cases:  # 7 x 582 = 4074 bytes: one full chunk in MONO8, two in MONO16
+        image = rng.integers(0, 256 if dtype == np.uint8 else 65536, shape).astype(dtype)
+        chunks = split_image(9, Eye.LEFT, image, (3, 4), chunk_data)
+        assert chunks == _split_reference(9, Eye.LEFT, image, (3, 4), chunk_data)
+        assert all(type(c.data) is bytes and c.eye is Eye.LEFT for c in chunks)
+        assert b"".join(c.data for c in chunks) == image.astype(image.dtype.newbyteorder("<")).tobytes()
+
+
+def test_assembler_drops_an_image_whose_chunks_disagree_on_its_geometry() -> None:
+    image = np.arange(100, dtype=np.uint8).reshape(10, 10)
+    first, *rest = split_image(1, Eye.RIGHT, image, chunk_data=30)
+    changes = (("width", 20), ("height", 11), ("roi_x", 1), ("roi_y", 1), ("chunk_count", 5), ("pixel_format", 2))
+    for field, value in changes:
+        assembler = ImageAssembler()
+        assert assembler.add(first) is None
+        assert assembler.add(replace(rest[0], **{field: value})) is None and assembler.inconsistent == 1, field
+        assert [assembler.add(c) for c in rest] == [None] * len(rest)  # the image restarts without its first chunk
+    assembler = ImageAssembler()
+    assert [assembler.add(c) for c in (first, *rest)][-1].pixels.tobytes() == image.tobytes()
+    assert assembler.inconsistent == 0 and assembler.complete == 1

@@ -32,6 +32,7 @@ from eyehil.protocols import (
     PupilFlags,
     UnknownMessageTypeError,
     UnsupportedVersionError,
+    cobs,
     decode,
     decode_wire,
     encode,
@@ -39,7 +40,11 @@ from eyehil.protocols import (
     error_reply_for,
     seq_gap,
 )
+from eyehil.protocols.crc import crc16_bitwise
 from eyehil.protocols.header import HEADER, MAX_PAYLOAD, pack_frame, unpack_frame
+from eyehil.protocols.images import ImageAssembler, split_image
+from eyehil.protocols.messages import field_values
+from eyehil.protocols.stream import NativeReceiver
 
 GOLDEN = Path(__file__).parent / "golden"
 
@@ -228,3 +233,46 @@ def test_message_constructors_coerce_and_validate() -> None:
     assert eye.eye is Eye.LEFT and eye.flags is PupilFlags.DETECTED and isinstance(eye.glints, tuple)
     with pytest.raises(ValueError):
         EyeFeatures(Eye.BOTH, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+def _reference_wire(chunk: FrameChunk, seq: int, timestamp_us: int) -> bytes:
+    """A FRAME_CHUNK's wire bytes built from the layout, field by field, with the bitwise CRC and the reference COBS."""
+    payload = struct.pack("<IBBHHHHHHI", *field_values(chunk)[:-1]) + chunk.data
+    body = HEADER.pack(0x4845, 1, 0x91, seq % 2**32, timestamp_us, len(payload)) + payload
+    return cobs.encode_reference(body + struct.pack("<H", crc16_bitwise(body))) + b"\x00"
+
+
+def test_image_chunks_are_the_reference_bytes_on_the_wire_and_decode_back() -> None:
+    rng = np.random.default_rng(14)
+    images = [rng.integers(1, 256, (240, 320)), rng.integers(0, 256, (240, 320)), np.zeros((60, 70)),
+              np.full((17, 254), 7), rng.integers(0, 2, (33, 508))]  # fmt: skip
+    seqs = [0, 1, 0x01000000, 0xFFFFFFFF, 2**32 + 5, 0x00FF00FF, 0x12345678]
+    receiver, assembler, wire = NativeReceiver(), ImageAssembler(), b""
+    for n, pixels in enumerate(images):
+        chunks = split_image(n, Eye(n % 3), pixels.astype(np.uint8), (n, 2 * n))
+        for k, chunk in enumerate(chunks):
+            seq, timestamp_us = seqs[(n + k) % len(seqs)], int(rng.integers(0, 2**63))
+            wire_k = encode(chunk, seq, timestamp_us)
+            assert wire_k == _reference_wire(chunk, seq, timestamp_us), (n, k)
+            assert chunk.to_payload() == struct.pack("<IBBHHHHHHI", *field_values(chunk)[:-1]) + chunk.data
+            wire += wire_k
+    done = [assembler.add(e.message) for e in receiver.feed(wire)]
+    assert [d.pixels.tobytes() for d in done if d is not None] == [p.astype(np.uint8).tobytes() for p in images]
+    assert receiver.counters.rx_frames == len(done) and assembler.complete == len(images)
+
+
+def test_frame_chunk_coerces_numbers_to_enums_like_the_enum_constructors() -> None:
+    chunk = FrameChunk(1, np.uint8(2), 2, 2, 2, 0, 0, 0, 1, 0, bytearray(8))
+    assert chunk.eye is Eye.BOTH and chunk.pixel_format is PixelFormat.MONO16 and type(chunk.data) is bytes
+    assert FrameChunk(1, True, 1.0, 2, 2, 0, 0, 0, 1, 0, memoryview(b"ab")).eye is Eye(True) is Eye.LEFT
+    for eye, pixel_format in ((3, 1), (-1, 1), ("0", 1), ([0], 1), (0, 0), (0, 3), (0, None), (0, [1])):
+        with pytest.raises(ValueError):
+            FrameChunk(1, eye, pixel_format, 2, 2, 0, 0, 0, 1, 0, b"")
+
+
+def test_header_message_type_is_the_enum_member_or_the_unknown_number() -> None:
+    header, _ = unpack_frame(pack_frame(0x91, 1, 0, FrameChunk(1, 0, 1, 1, 1, 0, 0, 0, 1, 0, b"x").to_payload()))
+    assert header.msg_type is MessageType.FRAME_CHUNK
+    for number in (0x00, 0x55, 0x92, 0xFF):
+        header, _ = unpack_frame(pack_frame(number, 1, 0, b""))
+        assert header.msg_type == number and type(header.msg_type) is int

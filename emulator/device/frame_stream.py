@@ -209,12 +209,13 @@ class FrameStream:
         """Encode waiting chunks, numbered from `seq`, while the bytes downstream (plus `queued`, the core's output
         not yet read) stay under the budget; return the bytes and how many chunks they hold."""
         self._collect()
-        out, n = bytearray(), 0
-        while self._queue and self._downstream + queued + len(out) < self.options.budget_bytes:
+        frames: list[bytes] = []
+        size = 0  # bytes in `frames`
+        while self._queue and self._downstream + queued + size < self.options.budget_bytes:
             chunk, time_us, last = self._queue.popleft()
-            out += encode(chunk, (seq + n) % U32, time_us)
-            n += 1
+            frames.append(encode(chunk, (seq + len(frames)) % U32, time_us))
+            size += len(frames[-1])
             self.sent += chunk.chunk_index == chunk.chunk_count - 1
             self._queued_exposures -= last
-        self._downstream += len(out)
-        return bytes(out), n
+        self._downstream += size
+        return b"".join(frames), len(frames)
