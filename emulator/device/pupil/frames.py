@@ -21,7 +21,7 @@ process publishes in exposure order; with several, images of neighbouring exposu
 (their `index` tells). Capacity: at most `QUEUE` exposures
 wait for the frame thread and `ahead` render in the pool; an exposure offered to a full queue is dropped
 (`dropped` counts images, as it counts images whose rendering failed), so rendering never delays the datums.
-`ImageThread` is the simpler bounded thread of the world view (`pupil/world.py`): at most `QUEUE` jobs wait, a
+`ImageThread` is the simpler bounded thread of the world view (`pupil/world.py`): at most `IMAGE_QUEUE` jobs wait, a
 job offered to a full queue is dropped and counted, and the thread draws each itself.
 """
 
@@ -48,8 +48,10 @@ from eyehil.protocols.pupil import frame_datum, pack
 # encode_image lives in render_pool (workers encode)
 __all__ = ["FrameJob", "FramePublisher", "ImageThread", "encode_image"]
 
-QUEUE = 2
-AHEAD = 4  # exposures rendering in the pool at most (with workers)
+QUEUE = 8  # exposures waiting for the frame thread at most
+IMAGE_QUEUE = 2  # jobs waiting for an `ImageThread` (the world view draws on that thread) at most
+AHEAD = 8  # exposures rendering in the pool at most (with workers): 40 ms at 200 Hz. With 2 and 4, a render
+# process held back by the system for 30 ms dropped images (python -m bench zmq, 2 cores)
 POLL_S = 0.1
 
 
@@ -67,14 +69,14 @@ class FrameJob:
 
 class ImageThread:
     """A thread that renders and publishes images on its own PUB (connected to the backbone's XSUB), fed
-    through a queue of at most `QUEUE` jobs: a job offered to a full queue is dropped and its `images`
+    through a queue of at most `IMAGE_QUEUE` jobs: a job offered to a full queue is dropped and its `images`
     counted in `dropped`, so the offering thread never waits. Subclasses draw and send in `_publish(job)`."""
 
     THREAD_NAME = "eyehil-zmq-images"
 
     def __init__(self, context: zmq.Context, endpoint: str, hwm: int) -> None:
         self.dropped = self.published = 0
-        self._queue: queue.Queue = queue.Queue(QUEUE)
+        self._queue: queue.Queue = queue.Queue(IMAGE_QUEUE)
         self._stop = threading.Event()
         self._pub = context.socket(zmq.PUB)
         self._pub.setsockopt(zmq.LINGER, 0)

@@ -18,7 +18,7 @@ gaze script's target (the end point of a saccade under way, the moving point of 
 
 Publishing (`WorldPublisher`, thread "eyehil-zmq-world", `frames.ImageThread`): the device thread offers
 every k-th exposure, k = max(1, round(rate / world_rate)), while frame publishing is on, in the frame
-publisher's format; at most `frames.QUEUE` wait, more are dropped and counted (`world_dropped`); `index`
+publisher's format; at most `frames.IMAGE_QUEUE` wait, more are dropped and counted (`world_dropped`); `index`
 counts the frames offered, dropped ones included. Payload as `frame.eye.<id>` (`protocols.pupil.frame_datum`).
 """
 
