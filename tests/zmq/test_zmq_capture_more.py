@@ -36,7 +36,26 @@ def _connect(ctx: zmq.Context, port: int, *prefixes: str) -> tuple[zmq.Socket, z
     sub.connect(f"tcp://127.0.0.1:{req.recv_string()}")
     for p in prefixes:
         sub.setsockopt_string(zmq.SUBSCRIBE, p)
+    _wait_subscribed(req, sub)
     return req, sub
+
+
+def _wait_subscribed(req: zmq.Socket, sub: zmq.Socket) -> None:
+    """Return once `sub` receives a notification sent through `req`: a ZeroMQ subscription takes effect a little
+    after connecting, and a notification published before then (``notify.recording.started``) is lost to it.
+    What `sub` received before the probe came back is dropped."""
+    probe = "notify.eyehil_test.subscribed"
+    sub.setsockopt_string(zmq.SUBSCRIBE, probe)
+    end = time.monotonic() + DEADLINE_S
+    while time.monotonic() < end:
+        req.send_multipart([probe.encode(), msgpack.packb({"subject": probe.removeprefix("notify.")})])
+        assert req.recv_string() == "Message forwarded."
+        resend = time.monotonic() + 0.05  # streamed datums may keep arriving: send the probe again after 50 ms
+        while time.monotonic() < resend and sub.poll(50):
+            if sub.recv_multipart()[0].decode() == probe:
+                sub.setsockopt_string(zmq.UNSUBSCRIBE, probe)
+                return
+    raise AssertionError(f"the subscription never received {probe} within {DEADLINE_S} s")
 
 
 def _ask(req: zmq.Socket, command: str) -> str:
