@@ -172,14 +172,39 @@ def render_window(outline: EyeOutline, rng: np.random.Generator, *, origin: tupl
                   settings: RenderSettings | None = None) -> Frame:
     """Eyes `outline` (shape (n,)) drawn into the sensor window at `origin` (x0, y0) of `size` (w, h)."""
     settings = settings or RenderSettings()
+    canvas = draw_window(outline, rng, origin=origin, size=size, settings=settings)
+    image = expose_canvas(canvas, rng, settings)
+    return Frame(image=image, roi_xy=origin, outline=outline, sensor_px=outline.sensor_px)
+
+
+@dataclass(frozen=True, eq=False)
+class Canvas:
+    """What a window shows before the sensor: radiance (H, W) float32 DN after the defocus blur, flat skin outside
+    `boxes` (the rows [r0, r1) and columns [c0, c1) drawn, None for an eye off the window)."""
+
+    signal: np.ndarray
+    boxes: tuple[Box | None, ...]
+
+
+def draw_window(outline: EyeOutline, rng: np.random.Generator, *, origin: tuple[int, int], size: tuple[int, int],
+                settings: RenderSettings) -> Canvas:
+    """The noiseless canvas of eyes `outline` (n,) in the sensor window at `origin` (x0, y0) of `size` (w, h). Its
+    signal is this thread's scratch array, overwritten by the next call (copy it to keep it). Draws random numbers
+    from `rng` only for eyelashes (`Appearance.lashes`)."""
     levels = settings.levels()
     canvas = _scratch((size[1], size[0]))[0]
     canvas.fill(levels.skin)
-    boxes = [draw_eye(canvas, origin, outline[i], levels, rng) for i in range(outline.shape[0])]
+    boxes = tuple(draw_eye(canvas, origin, outline[i], levels, rng) for i in range(outline.shape[0]))
     for box in boxes:
         _blur(canvas, box, settings.sensor.blur_sigma_px)
-    image = expose(canvas, settings.sensor, rng, flat=(levels.skin, boxes))
-    return Frame(image=image, roi_xy=origin, outline=outline, sensor_px=outline.sensor_px)
+    return Canvas(canvas, boxes)
+
+
+def expose_canvas(canvas: Canvas, rng: np.random.Generator, settings: RenderSettings) -> np.ndarray:
+    """The image of `canvas` through the sensor (`expose`); the canvas is left as it is."""
+    read, k = _noise(settings.sensor)
+    signal = canvas.signal if read > 0 or k > 0 else canvas.signal.copy()  # noiseless: quantised in place
+    return expose(signal, settings.sensor, rng, flat=(settings.levels().skin, list(canvas.boxes)))
 
 
 def _blur(canvas: np.ndarray, box: Box | None, sigma: float) -> None:
