@@ -18,6 +18,7 @@ import argparse
 import contextlib
 import importlib
 import signal
+import sys
 import threading
 from typing import TYPE_CHECKING
 
@@ -37,6 +38,13 @@ LINKS: dict[str, str] = {
     "tcp": "eyehil.emulator.device.links.tcp:TcpLink",
     "usbip": "eyehil.emulator.device.links.usbip.link:UsbipLink",
 }
+NATIVE_LINKS = frozenset(LINKS)
+#: the interpreter's thread switch interval (s) in a process running a native link. The link's I/O thread waits in
+#: select() and then for the interpreter lock, which the device's thread holds while it renders and encodes; at
+#: Python's default of 5 ms the I/O thread refilled a pseudo-terminal's ~12 kB buffer late, and 320 x 240 frames
+#: over a pty varied from 144 to 360 frames/s between runs (bench frames, 2 cores, 8 runs twice); at 0.1 ms,
+#: 284 to 416 (docs/benchmarks.md, seventh session).
+LINK_SWITCH_INTERVAL_S = 0.0001
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -164,6 +172,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"geometry: {write_geometry(load_scene(opts.scene), args.write_geometry)}", flush=True)
     stop, interrupted = threading.Event(), False
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())  # SIGTERM stops cleanly, like Ctrl-C
+    if args.link in NATIVE_LINKS:
+        sys.setswitchinterval(LINK_SWITCH_INTERVAL_S)
     try:
         with make_runner(opts, args) as runner, contextlib.ExitStack() as view:
             print(f"url: {runner.url}", flush=True)
