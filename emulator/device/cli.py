@@ -172,6 +172,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"geometry: {write_geometry(load_scene(opts.scene), args.write_geometry)}", flush=True)
     stop, interrupted = threading.Event(), False
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())  # SIGTERM stops cleanly, like Ctrl-C
+    interval = sys.getswitchinterval()
     if args.link in NATIVE_LINKS:
         sys.setswitchinterval(LINK_SWITCH_INTERVAL_S)
     try:
@@ -188,4 +189,5 @@ def run(args: argparse.Namespace) -> int:
                 interrupted = True  # the device and its links close first, then the usual exit for Ctrl-C
     finally:
         signal.signal(signal.SIGTERM, previous)
+        sys.setswitchinterval(interval)
     return 130 if interrupted else 0  # SIGTERM and --duration end normally

@@ -14,6 +14,7 @@ from device_helpers import query
 
 from eyehil.cli import main
 from eyehil.drivers.recording import read_recording
+from eyehil.emulator.device import cli as emulate_cli
 
 
 @pytest.fixture
@@ -29,6 +30,14 @@ def geometry(tmp_path, capsys):
 def test_emulate_on_a_pty_prints_its_path(capsys) -> None:
     assert main(["emulate", "--link", "pty", "--duration", "0", "--mode", "iscan", "--behaviour", "jitter=0.02"]) == 0
     assert "url: /dev/pts/" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(("link", "expected"), [("pty", emulate_cli.LINK_SWITCH_INTERVAL_S), ("zmq", None)])
+def test_a_native_link_runs_with_a_short_switch_interval_and_restores_it(link, expected, monkeypatch, capsys) -> None:
+    before, seen = sys.getswitchinterval(), []
+    monkeypatch.setattr(emulate_cli, "wait_for_stop", lambda *_: seen.append(sys.getswitchinterval()))
+    assert main(["emulate", "--link", link, "--port", "0", "--duration", "0"]) == 0
+    assert seen == [pytest.approx(before if expected is None else expected)] and sys.getswitchinterval() == before
 
 
 def test_info_and_stream(capsys) -> None:
