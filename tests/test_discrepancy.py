@@ -418,3 +418,14 @@ def test_blignaut_conditions_include_the_features_of_recordings(hidden_eyes) -> 
     plain = Evaluator("blignaut2014", hidden_eyes[:4], seed=5).base_metrics
     shifted = [n for n in names if not np.allclose(measured.conditions[n].values, plain[n])]
     assert any(n.startswith("gain_") for n in shifted)  # a flatter cornea changes how the pupil moves on the glints
+
+
+def test_blind_trials_can_draw_their_model_eyes_from_the_hidden_eyes_population() -> None:
+    from eyehil.analysis.discrepancy.trials import model_eyes
+
+    drawn, published = model_eyes("rozema", 5, 0), model_eyes("published", 5, 0)
+    assert len(drawn) == len(published) == 5
+    assert not np.allclose(drawn.anterior_radius, published.anterior_radius)
+    assert np.array_equal(model_eyes("rozema", 5, 0).anterior_radius, drawn.anterior_radius)
+    with pytest.raises(ValueError, match="model eyes"):
+        model_eyes("mine", 5, 0)

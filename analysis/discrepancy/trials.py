@@ -12,6 +12,8 @@ workflow blind on the first `search_eyes` published eyes (show: the first `show_
 - negative: nothing hidden;
 - outside: one effect hidden and removed from the catalogue the workflow may use.
 
+The model eyes (`--model-eyes`) are the published eyes by default, or a Rozema draw of their own (`model_eyes`).
+
 Scores per trial (`score`): named (the hidden effect is the first named, outcome "explained"), both named and
 in order (pairs: both named; and in the order of their sizes), nothing added (negatives), "none explains"
 (outside), shrink (1 - D_after / D_before, show eyes), and whether each hidden parameter lies within
@@ -40,13 +42,32 @@ def draw(effect, rng: np.random.Generator) -> dict[str, float]:
     return out
 
 
+#: `--model-eyes`: "published", the first of the 100 published eyes (the default: the workflow's own model eyes,
+#: a sample that differs from the Rozema draws of the hidden eyes in absolute feature levels, docs/discrepancy.md);
+#: "rozema", a Rozema 2011 draw of their own (fixed across trials, seed `MODEL_SEED` + the trials' seed), so
+#: model and hidden eyes come from one population and only the hidden effect tells them apart
+MODEL_EYES = ("published", "rozema")
+MODEL_SEED = 99_991
+
+
+def model_eyes(kind: str, count: int, seed: int):
+    """The trials' model eyes (`MODEL_EYES`), `count` of them; the search uses the first ones."""
+    from eyehil.emulator.eye.population import sample
+    from eyehil.emulator.eye.published import published_eyes
+
+    if kind not in MODEL_EYES:
+        raise ValueError(f"model eyes must be one of {', '.join(MODEL_EYES)}, got {kind!r}")
+    if kind == "published":
+        return published_eyes()[:count]
+    return sample(count, np.random.default_rng(MODEL_SEED + seed)).eyes
+
+
 def trial(kind: str, index: int, *, experiment: str, search_eyes: int, show_eyes: int, hidden_eyes: int,
-          seed: int, features: bool = False) -> dict:
+          seed: int, features: bool = False, model: str = "published") -> dict:
     from eyehil.analysis.discrepancy.workflow import hidden_measured, run_discrepancy
     from eyehil.emulator import effects
     from eyehil.emulator.effects import Applied
     from eyehil.emulator.eye.population import sample
-    from eyehil.emulator.eye.published import published_eyes
 
     rng = np.random.default_rng(seed + 1000 * index)
     names = [n for n in effects.names() if not (experiment == "blignaut2014" and effects.get(n).validation_only)]
@@ -70,12 +91,13 @@ def trial(kind: str, index: int, *, experiment: str, search_eyes: int, show_eyes
         conditions = [*chosen.diagnostic_conditions(host), *feature_names(host.head_positions)]
     measured = hidden_measured(hidden, eyes=eyes, experiment=experiment, conditions=conditions,
                                seed=seed + 3 + index)
-    order = sizes(hidden, eyes, experiment, conditions, seed + 3 + index, published_eyes()[:search_eyes], seed) \
+    show = model_eyes(model, max(show_eyes, search_eyes), seed)
+    order = sizes(hidden, eyes, experiment, conditions, seed + 3 + index, show[:search_eyes], seed) \
         if len(hidden) == 2 else [a.effect.name for a in hidden]
     start = time.perf_counter()
-    result = run_discrepancy(measured, eyes=published_eyes()[:show_eyes], search_eyes=published_eyes()[:search_eyes],
+    result = run_discrepancy(measured, eyes=show[:show_eyes], search_eyes=show[:search_eyes],
                              effect_names=allowed, rounds=2, seed=seed)
-    record = {"kind": kind, "index": index, "experiment": experiment, "features": features,
+    record = {"kind": kind, "index": index, "experiment": experiment, "features": features, "model_eyes": model,
               "hidden": [a.label() for a in hidden], "hidden_order": order,
               "hidden_values": {a.effect.name: dict(a.values) for a in hidden}, "seconds": time.perf_counter() - start,
               **result.summary()}
@@ -131,13 +153,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--features", action="store_true",
                         help="measured data as from recordings: feature conditions besides the gaze errors")
+    parser.add_argument("--model-eyes", default="published", choices=MODEL_EYES,
+                        help="the workflow's model eyes: the published eyes (default) or a Rozema draw of their own")
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    path = out / f"trials-{args.experiment}-{args.kind}{'-features' if args.features else ''}.jsonl"
+    tags = ("-features" if args.features else "") + ("" if args.model_eyes == "published" else f"-{args.model_eyes}")
+    path = out / f"trials-{args.experiment}-{args.kind}{tags}.jsonl"
     for i in range(args.first, args.first + args.trials):
         rec = trial(args.kind, i, experiment=args.experiment, search_eyes=args.search_eyes, show_eyes=args.show_eyes,
-                    hidden_eyes=args.hidden_eyes, seed=args.seed, features=args.features)
+                    hidden_eyes=args.hidden_eyes, seed=args.seed, features=args.features, model=args.model_eyes)
         with path.open("a", encoding="utf-8") as f:
             f.write(json.dumps(rec, default=float) + "\n")
         print(json.dumps({k: rec[k] for k in ("kind", "index", "hidden", "outcome", "named_effects", "hidden_order",
