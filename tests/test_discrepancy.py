@@ -429,3 +429,24 @@ def test_blind_trials_can_draw_their_model_eyes_from_the_hidden_eyes_population(
     assert np.array_equal(model_eyes("rozema", 5, 0).anterior_radius, drawn.anterior_radius)
     with pytest.raises(ValueError, match="model eyes"):
         model_eyes("mine", 5, 0)
+
+
+def test_the_scatter_conditions_tell_feature_noise_from_eye_and_head_movement(scene) -> None:
+    """`spacing_sd` (glint spacing about its plane over the targets) grows with noise on each glint centre, not
+    with an eye rotation; `pgv_sd` (the pupil-glint vector about its planes) grows with both."""
+    from eyehil.analysis.discrepancy.recording import _plane_residual, feature_conditions
+
+    t = np.linspace(-1.0, 1.0, 9)
+    plane = np.stack([np.ones(9), t, t[::-1] ** 2], axis=-1)
+    v = np.stack([1.0 + 2.0 * plane[:, 1] - 3.0 * plane[:, 2], np.r_[[np.nan] * 6, 1.0, 2.0, 3.0]])
+    np.testing.assert_allclose(_plane_residual(v, plane), [0.0, np.nan], atol=1e-20)  # exact plane; 3 values: NaN
+    eyes = published_eyes()[:10]
+
+    def scatter(name=None, **values):
+        applied = [] if name is None else [Applied.of(effects.get(name), values)]
+        c = feature_conditions(simulate_with(eyes, scene, applied, rng=np.random.default_rng(0)))
+        return np.mean(c["spacing_sd:central"]), np.mean(c["pgv_sd:central"])
+
+    base, noise, rotation = scatter(), scatter("feature_noise", sigma_px=0.2), scatter("fixation_error", sigma_deg=0.5)
+    assert noise[0] > 1.3 * base[0] and noise[1] > 1.3 * base[1]
+    assert abs(rotation[0] - base[0]) < 0.1 * base[0] and rotation[1] > 1.3 * base[1]

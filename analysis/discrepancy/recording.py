@@ -17,7 +17,12 @@ than the first is compared within subjects to the first, like the gaze condition
   how far the pupil moves relative to the glints per unit of gaze, which the corneal shape, the pupil's
   position and the camera set;
 - `glint_spacing:<h>`: the distance between the first and last glint (px), mean over targets;
-- `pupil_major:<h>` (px) and `pupil_ratio:<h>` (minor / major axis), means over targets.
+- `pupil_major:<h>` (px) and `pupil_ratio:<h>` (minor / major axis), means over targets;
+- `spacing_sd:<h>`: the SD over targets of the glint spacing about its least-squares plane in the target's screen
+  x and y (px): per-fixation noise on each glint centre shows here, an eye rotation or a head movement, which move
+  the glints together, barely;
+- `pgv_sd:<h>`: the SD over targets of the pupil-glint vector about its least-squares planes in x and y (px, x and
+  y pooled): per-fixation scatter of the features, of the gaze (fixation error) and of the head.
 
 The gaze conditions (H1, head:*, bias_*) come from running the host's own calibration on the recorded
 features (`eyehil.analysis.discrepancy.metrics`), exactly as for the simulated eyes.
@@ -36,7 +41,8 @@ from eyehil.drivers.recording import FORMAT, VERSION, read_recording
 from eyehil.emulator.features import Features, empty_features
 from eyehil.emulator.scene import Scene, load_scene
 
-QUANTITIES = ("pgv_x", "pgv_y", "gain_x", "gain_y", "glint_spacing", "pupil_major", "pupil_ratio")
+QUANTITIES = ("pgv_x", "pgv_y", "gain_x", "gain_y", "glint_spacing", "pupil_major", "pupil_ratio", "spacing_sd",
+              "pgv_sd")
 DETECTED, GLINT_VALID = 0x01, 0x01
 
 
@@ -66,7 +72,28 @@ def feature_conditions(features: Features, side: str = "right") -> dict[str, np.
             out[f"glint_spacing:{name}"] = np.nanmean(spacing[:, h], axis=-1)
             out[f"pupil_major:{name}"] = np.nanmean(axes[:, h, :, 0], axis=-1)
             out[f"pupil_ratio:{name}"] = np.nanmean(axes[:, h, :, 1] / axes[:, h, :, 0], axis=-1)
+            plane = np.stack([np.ones_like(tx), tx, ty], axis=-1)  # (T, 3)
+            out[f"spacing_sd:{name}"] = np.sqrt(_plane_residual(spacing[:, h], plane))
+            ssr_x, ssr_y = (_plane_residual(pgv[:, h, :, c], plane) for c in (0, 1))
+            out[f"pgv_sd:{name}"] = np.sqrt(0.5 * (ssr_x + ssr_y))
     return out
+
+
+def _plane_residual(v: np.ndarray, plane: np.ndarray) -> np.ndarray:
+    """Per eye, the residual variance (unbiased, n - 3 dof) of v (E, T) about its least-squares fit on the columns
+    of `plane` (T, 3), over the finite values; NaN with fewer than 4."""
+    ok = np.isfinite(v)
+    w = ok.astype(float)
+    y = np.where(ok, v, 0.0)
+    normal = np.einsum("et,ti,tj->eij", w, plane, plane)
+    rhs = np.einsum("et,ti,et->ei", w, plane, y)
+    n = ok.sum(axis=-1)
+    good = n >= plane.shape[1] + 1
+    beta = np.zeros((len(v), plane.shape[1]))
+    if good.any():
+        beta[good] = np.linalg.solve(normal[good], rhs[good][..., None])[..., 0]
+    residual = np.where(ok, y - beta @ plane.T, 0.0)
+    return np.where(good, (residual**2).sum(axis=-1) / np.maximum(n - plane.shape[1], 1), np.nan)
 
 
 def feature_names(head_positions) -> list[str]:
