@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import threading
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -142,8 +143,8 @@ def render_region(renderer: ExposureRenderer, values: np.ndarray, eye_indices: t
     return _render(renderer, key, window, (w, h), rng)
 
 
-def _render(renderer: ExposureRenderer, key: tuple, window, size: tuple[int, int], rng: np.random.Generator
-            ) -> Frame:
+def _render(renderer: ExposureRenderer, key: tuple, window: Callable[[], tuple[EyeOutline, tuple[int, int]]],
+            size: tuple[int, int], rng: np.random.Generator) -> Frame:
     """The frame of the window `window()` gives (outline, origin), its canvas remembered under `key` where drawing
     draws no random numbers."""
     settings = renderer.settings
