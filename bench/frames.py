@@ -1,19 +1,18 @@
 """Benchmark: camera images streamed by the virtual tracker (FRAME_CHUNKs) and detected on the host.
 
-The device runs in its own process (`eyehil emulate --link pty|tcp --script demo --clock fast`, guestrin2006:
-one eye, one 320 x 240 crop per exposure, MONO8, 19 chunks); the host (this process) configures frames only,
-reassembles the chunks (`eyehil.drivers.wire`) and counts the images delivered per second of wall time, with the
-device's STATUS `frames_dropped`. The fast clock lets the device run as fast as the link and host allow, but
-never slower than the wall clock: exposures the device cannot render and send within the frame interval of the
-configured rate are dropped, so the rate (`RATE_HZ`) is set below what the link carries. Drops are counted over
-the measured window (STATUS while streaming); the images still rendering or waiting when the host sends STOP
-(up to `--render-workers`' four in flight) are abandoned by the device, counted in its STATUS as dropped, and
-reported apart. Then detection
+The device runs in its own process (`eyehil emulate --link pty|tcp --script demo --clock fast`, guestrin2006: one
+eye, one 320 x 240 crop per exposure, MONO8, 19 chunks); the host (this process) configures frames only, reassembles
+the chunks (`eyehil.drivers.wire`) and counts the images delivered per second of wall time, with the device's STATUS
+`frames_dropped`. The fast clock lets the device run as fast as the link and host allow, but never slower than the
+wall clock: exposures the device cannot render and send within the frame interval of the configured rate are
+dropped, so the rate (`RATE_HZ`) is set below what the link carries. Drops are counted over the measured window
+(STATUS while streaming); the images still rendering or waiting when the host sends STOP (up to `--render-workers`'
+four in flight) are abandoned by the device, counted in its STATUS as dropped, and reported apart. Then detection
 throughput: `eyehil.drivers.detect.detect_eye` on the received images, one core. Targets (issue 16): >= 1,000
-frames/s over a pty and >= 2,000 over TCP, none dropped (`TARGET_FPS`). `CASES`: rendering on the device's
-thread or in one render process (`--render-workers 1`, rendering ahead of the link), and a pty paced to a
-full-speed USB device (`--link-rate usb-fs`: about 15 such images per second of device time fit; on the lockstep
-fast clock device time runs faster than the wall, so that case also reports its rate per second of device time).
+frames/s over a pty and >= 2,000 over TCP, none dropped (`TARGET_FPS`). `CASES`: rendering on the device's thread or
+in one render process (`--render-workers 1`, rendering ahead of the link), and a pty paced to a full-speed USB
+device (`--link-rate usb-fs`: about 15 such images per second of device time fit; on the lockstep fast clock device
+time runs faster than the wall, so that case also reports its rate per second of device time).
 """
 
 from __future__ import annotations

@@ -56,6 +56,7 @@ def feature_conditions(features: Features, side: str = "right") -> dict[str, np.
     pgv = pupil - glints.mean(axis=-2)
     spacing = np.linalg.norm(glints[..., 0, :] - glints[..., -1, :], axis=-1)
     tx, ty = (features.targets[:, i] - features.targets[:, i].mean() for i in (0, 1))
+    plane = np.stack([np.ones_like(tx), tx, ty], axis=-1)  # (T, 3): the scatter conditions' least-squares plane
     out = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
@@ -72,7 +73,6 @@ def feature_conditions(features: Features, side: str = "right") -> dict[str, np.
             out[f"glint_spacing:{name}"] = np.nanmean(spacing[:, h], axis=-1)
             out[f"pupil_major:{name}"] = np.nanmean(axes[:, h, :, 0], axis=-1)
             out[f"pupil_ratio:{name}"] = np.nanmean(axes[:, h, :, 1] / axes[:, h, :, 0], axis=-1)
-            plane = np.stack([np.ones_like(tx), tx, ty], axis=-1)  # (T, 3)
             out[f"spacing_sd:{name}"] = np.sqrt(_plane_residual(spacing[:, h], plane))
             ssr_x, ssr_y = (_plane_residual(pgv[:, h, :, c], plane) for c in (0, 1))
             out[f"pgv_sd:{name}"] = np.sqrt(0.5 * (ssr_x + ssr_y))

@@ -38,7 +38,6 @@ LINKS: dict[str, str] = {
     "tcp": "eyehil.emulator.device.links.tcp:TcpLink",
     "usbip": "eyehil.emulator.device.links.usbip.link:UsbipLink",
 }
-NATIVE_LINKS = frozenset(LINKS)
 #: the interpreter's thread switch interval (s) in a process running a native link. The link's I/O thread waits in
 #: select() and then for the interpreter lock, which the device's thread holds while it renders and encodes; at
 #: Python's default of 5 ms the I/O thread refilled a pseudo-terminal's ~12 kB buffer late, and 320 x 240 frames
@@ -173,7 +172,7 @@ def run(args: argparse.Namespace) -> int:
     stop, interrupted = threading.Event(), False
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())  # SIGTERM stops cleanly, like Ctrl-C
     interval = sys.getswitchinterval()
-    if args.link in NATIVE_LINKS:
+    if args.link in LINKS:  # the native links
         sys.setswitchinterval(LINK_SWITCH_INTERVAL_S)
     try:
         with make_runner(opts, args) as runner, contextlib.ExitStack() as view:
