@@ -31,6 +31,7 @@ from eyehil.emulator.fixation import LineOfSight, eye_centres, line_of_sight, li
 from eyehil.emulator.optics.ellipse import fit_ellipse
 from eyehil.emulator.optics.glint import solve_glints
 from eyehil.emulator.optics.pupil import pupil_boundary, solve_exit_points
+from eyehil.emulator.optics.rays import affine
 from eyehil.emulator.scene import HeadPose, Scene
 
 POINTS_PER_CHUNK = 120_000
@@ -67,6 +68,12 @@ class Placement:
     def eye_to_scene(self, p: np.ndarray) -> np.ndarray:
         """Eye-frame points (E, H, T, N, 3) -> scene frame."""
         return np.einsum("hjk,ehtnk->ehtnj", self.rotation, p + self.apex) + self.translation[:, None, None, :]
+
+    def posed_to_scene(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The eye pose (eye-local -> eye frame: p -> a p + b, a (E, H, T, 3, 3), b (E, H, T, 3)) composed with
+        `eye_to_scene`: the matrices m and offsets o of eye-local -> scene, p -> m p + o (`rays.affine`)."""
+        m = np.einsum("hjk,ehtki->ehtji", self.rotation, a)
+        return m, np.einsum("hjk,ehtk->ehtj", self.rotation, b + self.apex) + self.translation[:, None, :]
 
 
 def simulate(
@@ -146,8 +153,10 @@ def _simulate_eyes(eye: EyeModel, scene: Scene, place: Placement, targets, poses
     def to_local(p_eye: np.ndarray) -> np.ndarray:  # (E, H, T, N, 3) eye frame -> eye-local (A^T (p - b))
         return np.einsum("ehtji,ehtnj->ehtni", a, p_eye - b[..., None, :])
 
+    local_to_scene = place.posed_to_scene(a, b)
+
     def to_scene(p_local: np.ndarray) -> np.ndarray:  # (E, H, T, N, 3) eye-local -> scene
-        return place.eye_to_scene(np.einsum("ehtij,ehtnj->ehtni", a, p_local) + b[..., None, :])
+        return affine(*local_to_scene, p_local)
 
     shape = a.shape[:3]
     camera = to_local(np.broadcast_to(place.scene_to_eye(scene.camera.position)[None, :, None, None], (*shape, 1, 3)))

@@ -8,7 +8,7 @@ import pytest
 from eyehil.emulator.optics.camera import PinholeCamera
 from eyehil.emulator.optics.conic import Conic
 from eyehil.emulator.optics.ellipse import fit_ellipse
-from eyehil.emulator.optics.rays import reflect, refract, unit
+from eyehil.emulator.optics.rays import affine, reflect, refract, unit
 
 RNG = np.random.default_rng(42)
 
@@ -134,6 +134,40 @@ def test_ellipse_fit_with_too_few_points_is_invalid() -> None:
     pts = np.array([[[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0], [2.0, 2.0]]])
     e = fit_ellipse(pts, np.array([[1, 1, 1, 1, 0]]))
     assert not e.valid[0]
+
+
+def test_ellipse_fit_of_collinear_points_is_invalid_and_spares_the_rest_of_the_batch() -> None:
+    th = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+    pts = np.stack([np.column_stack([th, 2 * th + 1]), np.column_stack([10 + 3 * np.cos(th), 5 + 2 * np.sin(th)])])
+    e = fit_ellipse(pts)
+    assert not e.valid[0] and e.valid[1]
+    np.testing.assert_allclose(e.axes[1], [6, 4], atol=1e-9)
+
+
+def test_ellipse_fit_of_noisy_points_is_the_least_squares_eigenvector() -> None:
+    """The element-wise eigenvector equals the general eigensolver's choice (Halir & Flusser: the eigenvector of
+    M = C1^-1 (S1 + S2 T) with 4 a c - b^2 > 0), here computed with np.linalg.eig from the same scatter matrices."""
+    rng = np.random.default_rng(5)
+    th = np.linspace(0, 2 * np.pi, 20, endpoint=False)
+    pts = np.column_stack([40 + 9 * np.cos(th), 30 + 4 * np.sin(th)])[None] + rng.normal(0, 0.5, (50, 20, 2))
+    e = fit_ellipse(pts)
+    for k in range(50):
+        x, y = ((pts[k] - pts[k].mean(axis=0)) / 1.0).T
+        d1, d2 = np.column_stack([x * x, x * y, y * y]), np.column_stack([x, y, np.ones_like(x)])
+        t = -np.linalg.solve(d2.T @ d2, d2.T @ d1)
+        m = np.array([[0, 0, 0.5], [0, -1, 0], [0.5, 0, 0]]) @ (d1.T @ d1 + d1.T @ d2 @ t)
+        vecs = np.linalg.eig(m)[1].real
+        a, b, c = vecs[:, np.argmax(4 * vecs[0] * vecs[2] - vecs[1] ** 2)]
+        d, e_, _ = t @ [a, b, c]
+        den = 4 * a * c - b * b
+        centre = np.array([b * e_ - 2 * c * d, b * d - 2 * a * e_]) / den + pts[k].mean(axis=0)
+        np.testing.assert_allclose(e.centre[k], centre, atol=1e-9)
+
+
+def test_affine_is_the_matrix_product_plus_offset() -> None:
+    rng = np.random.default_rng(2)
+    m, o, p = rng.normal(size=(4, 3, 3, 3)), rng.normal(size=(4, 3, 3)), rng.normal(size=(4, 3, 7, 3))
+    np.testing.assert_allclose(affine(m, o, p), np.einsum("abij,abnj->abni", m, p) + o[:, :, None], atol=1e-14)
 
 
 def test_near_and_far_roots_of_a_chord_through_the_cap() -> None:

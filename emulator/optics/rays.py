@@ -18,6 +18,17 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("...i,...i->...", a, b)
 
 
+def affine(m: np.ndarray, o: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """m p + o for points p (..., N, 3), matrices m (..., 3, 3) and offsets o (..., 3), one row of m at a time
+    (several times faster than einsum or matmul over many small 3 x 3 products)."""
+    x, y, z = (p[..., k] for k in range(3))
+    m, o = m[..., None, :, :], o[..., None, :]
+    out = np.empty(np.broadcast_shapes(p.shape, o.shape))
+    for j in range(3):
+        out[..., j] = x * m[..., j, 0] + y * m[..., j, 1] + z * m[..., j, 2] + o[..., j]
+    return out
+
+
 def unit(v: np.ndarray) -> np.ndarray:
     """v / |v| along the last axis."""
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
