@@ -30,7 +30,7 @@ from eyehil.emulator.eye.model import EyeModel
 from eyehil.emulator.eye.surfaces import cornea_optics, lens_surfaces, pupil_centre, retina
 from eyehil.emulator.optics.newton import secant2d
 from eyehil.emulator.optics.pupil import trace_into_eye
-from eyehil.emulator.optics.rays import _dot, distance_to_line, refract, unit
+from eyehil.emulator.optics.rays import _dot, distance_to_line, length, refract, unit
 
 FIXATION_TOLERANCE_MM = 0.01
 
@@ -88,7 +88,7 @@ def line_of_sight(eye: EyeModel, media: Media) -> LineOfSight:
     sol = secant2d(residual, stop[..., :2] - 3.0 * outward[..., :2], max_step=0.5, subset=False)
     entry, _ = optics.anterior.point(sol.q)
     fovea, reached = _trace_to_retina(eye, media, optics, entry, -outward)
-    valid = sol.ok & (np.linalg.norm(sol.residual, axis=-1) < 1e-6)
+    valid = sol.ok & (length(sol.residual) < 1e-6)
     return LineOfSight(origin=entry, direction=outward, fovea=fovea, valid=valid & reached)
 
 

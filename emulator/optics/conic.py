@@ -26,6 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from eyehil.emulator.optics.rays import length
+
 EPS_T = 1e-9  # mm: a ray does not meet the surface it starts on
 
 
@@ -82,7 +84,7 @@ class Conic:
         """Unit normal (..., 3) at surface points p; +z at the apex when R > 0."""
         w = self.apex - p[..., 2]
         n = np.stack([p[..., 0], p[..., 1], self.radius - (1.0 + self.conic) * w], axis=-1)
-        return n / np.linalg.norm(n, axis=-1, keepdims=True)
+        return n / length(n)[..., None]
 
     def on_cap(self, p: np.ndarray) -> np.ndarray:
         """Whether points p lie on the optical part of the surface (cap and aperture)."""

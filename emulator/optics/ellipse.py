@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from eyehil.emulator.optics.rays import length
+
 MIN_POINTS = 5
 # The scatter matrices S1, S2, S3 as indices into the weighted moments sum(w x^i y^j) of `fit_ellipse`, in the order
 # x^4, x^3 y, x^2 y^2, x y^3, y^4, x^3, x^2 y, x y^2, y^3, x^2, x y, y^2, x, y, 1.
@@ -98,7 +100,7 @@ def _constrained_eigenvector(r: np.ndarray) -> np.ndarray:
     shifted = r - lam[..., None, None] * _C1
     rows = np.moveaxis(shifted, -2, 0)
     crosses = np.stack([np.cross(rows[0], rows[1]), np.cross(rows[0], rows[2]), np.cross(rows[1], rows[2])], axis=-2)
-    lengths = np.linalg.norm(crosses, axis=-1)
+    lengths = length(crosses)
     best = np.take_along_axis(crosses, np.argmax(lengths, axis=-1)[..., None, None], axis=-2)[..., 0, :]
     return best / np.maximum(np.max(lengths, axis=-1), 1e-300)[..., None]
 

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from eyehil.emulator.optics.rays import length
+
 Residual = Callable[..., tuple[np.ndarray, np.ndarray]]
 SUBSET_FRACTION = 0.5
 
@@ -80,7 +82,7 @@ def _step(
     with np.errstate(divide="ignore", invalid="ignore"):
         dq = -np.stack([j11 * r[..., 0] - j01 * r[..., 1], -j10 * r[..., 0] + j00 * r[..., 1]], axis=-1)
         dq /= det[..., None]
-    size = np.linalg.norm(dq, axis=-1)
+    size = length(dq)
     dq *= np.minimum(1.0, max_step / np.where(size > 0, size, 1.0))[..., None]
     step = moving & good
     q = np.where(step[..., None], q + np.nan_to_num(dq), q)

@@ -26,7 +26,7 @@ from eyehil.emulator.optics.biconic import Biconic
 from eyehil.emulator.optics.conic import Conic, Plane
 from eyehil.emulator.optics.fused import BiconicPair, trace_biconic, trace_conic
 from eyehil.emulator.optics.newton import difference_jacobian, newton2d, secant2d
-from eyehil.emulator.optics.rays import _dot, refract, unit
+from eyehil.emulator.optics.rays import _dot, length, refract, unit
 
 PUPIL_TOLERANCE_MM = 1e-6
 
@@ -104,7 +104,7 @@ def solve_exit_points(
         jacobian = None if centre is None else _centre_jacobian(optics, camera, centre, fused)
         sol = secant2d(fused(optics, camera, target, q0.shape[:-1]), q0, jacobian=jacobian, max_step=0.5)
     a, _ = optics.anterior.point(sol.q)
-    miss = np.linalg.norm(sol.residual, axis=-1)
+    miss = length(sol.residual)
     valid = sol.ok & (miss <= PUPIL_TOLERANCE_MM)
     return ExitPoints(point=a, residual_mm=miss, valid=valid)
 
@@ -124,7 +124,7 @@ def _centre_jacobian(optics: CorneaOptics, camera: np.ndarray, centre: np.ndarra
     f = fused(optics, camera, centre, c0.shape[:-1])
     sol = secant2d(f, c0, max_step=0.5)
     jacobian = difference_jacobian(f, sol.q, sol.residual, None, 1e-7)
-    good = sol.ok & (np.linalg.norm(sol.residual, axis=-1) <= PUPIL_TOLERANCE_MM)
+    good = sol.ok & (length(sol.residual) <= PUPIL_TOLERANCE_MM)
     return np.where(good[..., None, None], jacobian, np.nan)
 
 
