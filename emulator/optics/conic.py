@@ -29,6 +29,7 @@ import numpy as np
 from eyehil.emulator.optics.rays import length
 
 EPS_T = 1e-9  # mm: a ray does not meet the surface it starts on
+Vec = tuple[np.ndarray, np.ndarray, np.ndarray]  # x, y, z as separate arrays
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,7 +95,16 @@ class Conic:
         return cap & (p[..., 0] ** 2 + p[..., 1] ** 2 <= self.aperture**2)
 
     def intersect(self, p: np.ndarray, u: np.ndarray, far: bool = False) -> tuple[np.ndarray, np.ndarray]:
-        """Ray p + t u (u unit) meets the cap: (t, valid); the nearest t > 0, or the farthest if `far`."""
+        """Ray p + t u (u unit) meets the cap: (t, valid); the nearest t > 0, or the farthest if `far`.
+
+        The nearest is `nearest_hit` on the components (the same numbers, bit for bit, in less time)."""
+        if not far:
+            fields = (self.apex, self.radius, self.conic, self.aperture)
+            scalar = np.broadcast_shapes(np.shape(p)[:-1], np.shape(u)[:-1], *map(np.shape, fields)) == ()
+            p, u = (np.atleast_2d(v) if scalar else v for v in (p, u))
+            t, valid = nearest_hit(self, (p[..., 0], p[..., 1], p[..., 2]), (u[..., 0], u[..., 1], u[..., 2]))
+            t = np.where(valid, t, np.nan)
+            return (t[0], valid[0]) if scalar else (t, valid)
         k = 1.0 + self.conic
         w0 = self.apex - p[..., 2]
         a = u[..., 0] ** 2 + u[..., 1] ** 2 + k * u[..., 2] ** 2
@@ -115,6 +125,54 @@ class Conic:
             best = np.where(hit & better, t, best)
         valid = np.isfinite(best)
         return np.where(valid, best, np.nan), valid
+
+
+def nearest_hit(c: Conic, p: Vec, u: Vec) -> tuple[np.ndarray, np.ndarray]:
+    """`Conic.intersect` (nearest t > 0 on the cap) on component arrays p = (x, y, z), u: (t, 0 where there is no
+    hit; valid).
+
+    The roots of the module docstring's quadratic and the cap test of `Conic.on_cap`, nearer root first: where the
+    nearer root hits it is the answer, and only the other elements (rays that miss or meet the far sheet first)
+    test the farther root. `fused.trace_conic` traces with it too."""
+    k = 1.0 + c.conic
+    w0 = c.apex - p[2]
+    a = u[0] ** 2 + u[1] ** 2 + k * u[2] ** 2
+    b = 2.0 * (p[0] * u[0] + p[1] * u[1] - k * w0 * u[2] + c.radius * u[2])
+    cc = p[0] ** 2 + p[1] ** 2 + k * w0**2 - 2.0 * c.radius * w0
+    disc = b * b - 4.0 * a * cc
+    sq = np.sqrt(np.maximum(disc, 0.0))
+    q = -0.5 * (b + np.where(b >= 0, sq, -sq))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        linear = np.abs(a) < 1e-14
+        t1 = np.where(linear, -cc / b, q / a)
+        t2 = np.where(linear, np.inf, cc / q)
+        near, far = np.fmin(t1, t2), np.fmax(t1, t2)  # a NaN root leaves the other in both
+    real = disc >= 0
+    shape = near.shape
+    hit = _hits_cap(c, p, u, near, real)
+    rest = np.nonzero(~hit & real)
+    if rest[0].size:
+        def pick(v):
+            return np.broadcast_to(v, shape)[rest]
+
+        sub = Conic(pick(c.apex), pick(c.radius), pick(c.conic), pick(c.aperture))
+        far_hit = _hits_cap(sub, tuple(map(pick, p)), tuple(map(pick, u)), far[rest], np.ones(rest[0].size, bool))
+        near = near.copy()
+        near[rest] = np.where(far_hit, far[rest], near[rest])
+        hit = hit.copy()
+        hit[rest] = far_hit
+    return np.where(hit, near, 0.0), hit
+
+
+def _hits_cap(c: Conic, p: Vec, u: Vec, t: np.ndarray, real: np.ndarray) -> np.ndarray:
+    """Whether the root t (> EPS_T, finite, of a real pair) lands on the cap within the aperture."""
+    k = 1.0 + c.conic
+    hit = real & np.isfinite(t) & (t > EPS_T)
+    s = np.where(hit, t, 0.0)
+    x, y, z = p[0] + s * u[0], p[1] + s * u[1], p[2] + s * u[2]
+    w_over_r = (c.apex - z) / c.radius
+    cap = (w_over_r >= -1e-12) & ((k <= 0) | (w_over_r * k <= 1.0 + 1e-12))
+    return hit & cap & (x**2 + y**2 <= c.aperture**2)
 
 
 @dataclass(frozen=True, eq=False)

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from eyehil.emulator.optics.biconic import MAX_NEWTON, SURFACE_TOLERANCE_MM, Biconic, guide_roots, sag
-from eyehil.emulator.optics.conic import EPS_T, Conic, Plane
+from eyehil.emulator.optics.conic import EPS_T, Conic, Plane, nearest_hit
 
 Vec = tuple[np.ndarray, np.ndarray, np.ndarray]
 #: the fraction of a batch still moving below which the posterior Newton iterates on those elements alone
@@ -57,52 +57,6 @@ def _refract(d: Vec, n: Vec, eta: np.ndarray) -> tuple[Vec, np.ndarray]:
     return (eta * d[0] + s * n[0], eta * d[1] + s * n[1], eta * d[2] + s * n[2]), k >= 0
 
 
-def _intersect(c: Conic, p: Vec, u: Vec) -> tuple[np.ndarray, np.ndarray]:
-    """`Conic.intersect` (nearest t > 0 on the cap): (t with 0 where there is no hit, valid).
-
-    The same roots and tests as `Conic.intersect`, taken nearer root first: where the nearer root hits it is the
-    answer, and only the other elements (rays that miss or meet the far sheet first) test the farther root."""
-    k = 1.0 + c.conic
-    w0 = c.apex - p[2]
-    a = u[0] ** 2 + u[1] ** 2 + k * u[2] ** 2
-    b = 2.0 * (p[0] * u[0] + p[1] * u[1] - k * w0 * u[2] + c.radius * u[2])
-    cc = p[0] ** 2 + p[1] ** 2 + k * w0**2 - 2.0 * c.radius * w0
-    disc = b * b - 4.0 * a * cc
-    sq = np.sqrt(np.maximum(disc, 0.0))
-    q = -0.5 * (b + np.where(b >= 0, sq, -sq))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        linear = np.abs(a) < 1e-14
-        t1 = np.where(linear, -cc / b, q / a)
-        t2 = np.where(linear, np.inf, cc / q)
-        near, far = np.fmin(t1, t2), np.fmax(t1, t2)  # a NaN root leaves the other in both
-    real = disc >= 0
-    shape = near.shape
-    hit = _on_cap(c, p, u, near, real)
-    rest = np.nonzero(~hit & real)
-    if rest[0].size:
-        def pick(v):
-            return np.broadcast_to(v, shape)[rest]
-
-        sub = Conic(pick(c.apex), pick(c.radius), pick(c.conic), pick(c.aperture))
-        far_hit = _on_cap(sub, tuple(map(pick, p)), tuple(map(pick, u)), far[rest], np.ones(rest[0].size, bool))
-        near = near.copy()
-        near[rest] = np.where(far_hit, far[rest], near[rest])
-        hit = hit.copy()
-        hit[rest] = far_hit
-    return np.where(hit, near, 0.0), hit
-
-
-def _on_cap(c: Conic, p: Vec, u: Vec, t: np.ndarray, real: np.ndarray) -> np.ndarray:
-    """Whether the root t (> EPS_T, finite, of a real pair) lands on the cap within the aperture."""
-    k = 1.0 + c.conic
-    hit = real & np.isfinite(t) & (t > EPS_T)
-    s = np.where(hit, t, 0.0)
-    x, y, z = p[0] + s * u[0], p[1] + s * u[1], p[2] + s * u[2]
-    w_over_r = (c.apex - z) / c.radius
-    cap = (w_over_r >= -1e-12) & ((k <= 0) | (w_over_r * k <= 1.0 + 1e-12))
-    return hit & cap & (x**2 + y**2 <= c.aperture**2)
-
-
 def trace_conic(
     anterior: Conic, posterior: Conic, plane: Plane, eta1: np.ndarray, eta2: np.ndarray,
     qx: np.ndarray, qy: np.ndarray, source: Vec,
@@ -119,7 +73,7 @@ def trace_conic(
     d0 = _unit(a[0] - source[0], a[1] - source[1], a[2] - source[2])
     ok &= _dot(na, d0) < 0
     d1, ok1 = _refract(d0, na, eta1)
-    t1, ok2 = _intersect(posterior, a, d1)
+    t1, ok2 = nearest_hit(posterior, a, d1)
     b = (a[0] + t1 * d1[0], a[1] + t1 * d1[1], a[2] + t1 * d1[2])
     d2, ok3 = _refract(d1, _normal(posterior, *b), eta2)
     with np.errstate(divide="ignore", invalid="ignore"):
