@@ -192,6 +192,22 @@ def test_a_fit_at_the_edge_of_its_range_is_flagged_and_not_added() -> None:
     assert fit.lowers() and not fit.passes()
 
 
+def test_rivals_are_the_candidates_that_fit_as_well_as_the_added_effect() -> None:
+    """D + 2k within 2 of the added fit's (and a significant drop of D): a rival; further: not."""
+    from eyehil.analysis.discrepancy.search import EffectFit
+    from eyehil.analysis.discrepancy.workflow import Round
+
+    def fit(name: str, D: float) -> EffectFit:
+        e = effects.get(name)
+        return EffectFit(e, {p.name: p.neutral for p in e.fitted}, {}, D, 100.0, 40, np.zeros((1, len(e.fitted))),
+                         np.array([D]))
+
+    added = fit("pupil_decentre", 10.0)  # k = 2: score 14
+    close, far = fit("cornea_decentre", 11.5), fit("head_roll", 14.5)  # scores 15.5 and 16.5
+    assert Round(None, [added, close, far], added, "").rivals == ["cornea_decentre"]  # type: ignore[arg-type]
+    assert Round(None, [added, close], None, "").rivals == []  # type: ignore[arg-type]
+
+
 def test_permutation_tests_hold_their_level_on_four_skewed_subjects() -> None:
     rng = np.random.default_rng(3)
     hits = 0
@@ -379,7 +395,8 @@ def test_cli_writes_the_report_and_reports_progress(tmp_path, capsys) -> None:
     assert "head_roll" in report and "Truth (hidden from the workflow)" in report and "Outcome:" in report
     assert json.loads((out / "result.json").read_text())["added"][0]["effect"] == "head_roll"
     summary = json.loads((out / "summary.json").read_text())
-    assert {"named_effects", "parameters", "gap_before", "gap_after", "outcome"} <= set(summary)
+    assert {"named_effects", "parameters", "gap_before", "gap_after", "outcome", "rivals"} <= set(summary)
+    assert summary["rivals"] == {"head_roll": []}  # the only candidate: nothing to tell it from
     captured = capsys.readouterr()
     assert "hidden truth: head_roll" in captured.out
     for stage in ("simulating and calibrating the search eyes", "round 1: fitting 1 effects", "show:"):
@@ -399,9 +416,14 @@ def test_blind_trials_score_a_pair_in_the_order_of_each_effect_alone(hidden_eyes
     class Result:
         shrink, added = 0.9, [big, small]
 
-    record = {"named_effects": order, "hidden_order": order, "outcome": "explained", "parameters": {}}
+    record = {"named_effects": order, "hidden_order": order, "outcome": "explained", "parameters": {},
+              "rivals": {"pupil_change": [], "feature_noise": []}}
     assert score(record, Result, [small, big]) | {"shrink": 0} == {"shrink": 0, "named_both": True, "in_order": True,
-                                                                   "added_nothing": False, "covered": []}
+                                                                   "added_nothing": False, "covered": [],
+                                                                   "hidden_among_rivals": [True, True]}
+    mimic = score({**record, "named_effects": ["cornea_decentre"], "rivals": {"cornea_decentre": ["feature_noise"]}},
+                  Result, [small, big])
+    assert mimic["hidden_among_rivals"] == [True, False]
     swapped = score({**record, "named_effects": order[::-1]}, Result, [small, big])
     assert swapped["named_both"] and not swapped["in_order"]
 

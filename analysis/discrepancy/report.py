@@ -13,7 +13,7 @@ from matplotlib.figure import Figure
 
 from eyehil.analysis.discrepancy.search import EffectFit
 from eyehil.analysis.discrepancy.stats import Comparison
-from eyehil.analysis.discrepancy.workflow import DiscrepancyResult, Round
+from eyehil.analysis.discrepancy.workflow import RIVAL_SCORE, DiscrepancyResult, Round
 from eyehil.emulator import effects as registry
 
 
@@ -92,7 +92,11 @@ def _round(i: int, r: Round) -> list[str]:
             lines.append(_row(k, f.effect.name, _fitted(f), f"{f.D:.2f}", f"{f.reduction:.2f}",
                               f"{100 * f.explained:.0f} %", f"{f.score:.2f}", f"{f.gof_p:.2g}", verdict, also))
         lines.append("")
-    return [*lines, f"Verdict: {r.verdict}.", ""]
+    lines.append(f"Verdict: {r.verdict}.")
+    if r.rivals:
+        lines.append(f"The data cannot tell {r.added.effect.name} from {', '.join(r.rivals)}: D + 2k within "
+                     f"{RIVAL_SCORE:g} of its own.")
+    return [*lines, ""]
 
 
 def _interactions(result: DiscrepancyResult) -> list[str]:

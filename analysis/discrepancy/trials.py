@@ -16,8 +16,10 @@ The model eyes (`--model-eyes`) are the published eyes by default, or a Rozema d
 
 Scores per trial (`score`): named (the hidden effect is the first named, outcome "explained"), both named and
 in order (pairs: both named; and in the order of their sizes), nothing added (negatives), "none explains"
-(outside), shrink (1 - D_after / D_before, show eyes), and whether each hidden parameter lies within
-the fit's 95 % interval (1.96 sigma). Results go to DIR/trials.json, one record per trial, and a summary.
+(outside), shrink (1 - D_after / D_before, show eyes), whether each hidden effect was added or fitted as well as
+an added one (`hidden_among_rivals`: the data could not tell it from the one named), and whether each hidden
+parameter lies within the fit's 95 % interval (1.96 sigma). Results go to DIR/trials.json, one record per trial,
+and a summary.
 """
 
 from __future__ import annotations
@@ -129,6 +131,8 @@ def score(record: dict, result, hidden) -> dict:
     elif hidden:
         out["named"] = bool(named) and named[0] == truth[0] and record["outcome"] == "explained"
     out["added_nothing"] = not result.added
+    rivals = {n for names in record.get("rivals", {}).values() for n in names} | set(record.get("rivals", {}))
+    out["hidden_among_rivals"] = [name in rivals for name in truth]
     covered = []
     for a in hidden:
         fit = record["parameters"].get(a.effect.name)

@@ -31,6 +31,10 @@ The **outcome** (`DiscrepancyResult.outcome`) is decided by a stated criterion:
 With two or more effects added, `interactions` reports D with each alone, all together, and the
 interaction D0 - D_all - sum_i (D0 - D_i) (0 when their contributions add; computed on the search eyes).
 
+Whether the data can tell the candidates apart: each round's `rivals` are the other effects whose fit is as good
+as the added one's (D + 2k within `RIVAL_SCORE`, the rule of thumb for two AICs: Burnham & Anderson 2002,
+"Model selection and multimodel inference", section 2.6); `summary.json` lists them per named effect.
+
 `hidden_measured` makes "measured" data by simulating other eyes with hidden effects, for testing the
 workflow blind (tests/test_discrepancy*.py, `eyehil discrepancy --hidden`).
 """
@@ -54,6 +58,7 @@ from eyehil.emulator.eye.model import EyeModel
 from eyehil.parallel import worker_pool
 
 ALPHA_GOF = 0.01
+RIVAL_SCORE = 2.0  # D + 2k within this of the added effect's: a rival the data cannot tell from it (`Round.rivals`)
 CHUNK = 12  # points per evaluation call (each a batched calibration)
 
 
@@ -90,6 +95,16 @@ class Round:
     fits: list[EffectFit]  # ranked, best first
     added: EffectFit | None
     verdict: str
+
+    @property
+    def rivals(self) -> list[str]:
+        """The other candidates the data cannot tell from the added effect: each lowers D significantly too
+        (`EffectFit.lowers`) and its D + 2k is within `RIVAL_SCORE` of the added one's. Those only screened
+        carry the surrogate's D, which a refinement would lower further, so the list errs on the short side."""
+        if self.added is None:
+            return []
+        return [f.effect.name for f in self.fits
+                if f is not self.added and f.lowers() and f.score - self.added.score <= RIVAL_SCORE]
 
 
 @dataclass(frozen=True)
@@ -134,8 +149,9 @@ class DiscrepancyResult:
         return sum(len(a.effect.fitted) for a in self.added)
 
     def summary(self) -> dict[str, Any]:
-        """What summary.json holds: the named effects in order, their parameters (value, 1 sigma, 95 %
-        half-width, edge flags), D before and after on the show eyes, the outcome and its reason."""
+        """What summary.json holds: the named effects in order, the rivals of each added one (`Round.rivals`),
+        their parameters (value, 1 sigma, 95 % half-width, edge flags), D before and after on the show eyes, the
+        outcome and its reason."""
         by_name = {f.effect.name: f for f in self.fits}
         parameters = {}
         for a in self.added:
@@ -145,6 +161,7 @@ class DiscrepancyResult:
                                                   "at_edge": p.name in f.at_edge} for p in a.effect.fitted}
         return {"outcome": self.outcome, "reason": self.reason,
                 "named_effects": [a.effect.name for a in self.named],
+                "rivals": {r.added.effect.name: r.rivals for r in self.rounds if r.added is not None},
                 "partial_effects": [] if self.outcome == "explained" else [a.effect.name for a in self.added],
                 "parameters": parameters,
                 "gap_before": {"D": self.before.D, "significant": [g.condition for g in self.before.significant]},
