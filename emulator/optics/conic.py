@@ -98,42 +98,28 @@ class Conic:
         """Ray p + t u (u unit) meets the cap: (t, valid); the nearest t > 0, or the farthest if `far`.
 
         The nearest is `nearest_hit` on the components (the same numbers, bit for bit, in less time)."""
+        fields = (self.apex, self.radius, self.conic, self.aperture)
+        scalar = np.broadcast_shapes(np.shape(p)[:-1], np.shape(u)[:-1], *map(np.shape, fields)) == ()
+        p, u = (np.atleast_2d(v) if scalar else v for v in (p, u))
+        pc, uc = (p[..., 0], p[..., 1], p[..., 2]), (u[..., 0], u[..., 1], u[..., 2])
         if not far:
-            fields = (self.apex, self.radius, self.conic, self.aperture)
-            scalar = np.broadcast_shapes(np.shape(p)[:-1], np.shape(u)[:-1], *map(np.shape, fields)) == ()
-            p, u = (np.atleast_2d(v) if scalar else v for v in (p, u))
-            t, valid = nearest_hit(self, (p[..., 0], p[..., 1], p[..., 2]), (u[..., 0], u[..., 1], u[..., 2]))
+            t, valid = nearest_hit(self, pc, uc)
             t = np.where(valid, t, np.nan)
             return (t[0], valid[0]) if scalar else (t, valid)
-        k = 1.0 + self.conic
-        w0 = self.apex - p[..., 2]
-        a = u[..., 0] ** 2 + u[..., 1] ** 2 + k * u[..., 2] ** 2
-        b = 2.0 * (p[..., 0] * u[..., 0] + p[..., 1] * u[..., 1] - k * w0 * u[..., 2] + self.radius * u[..., 2])
-        c = p[..., 0] ** 2 + p[..., 1] ** 2 + k * w0**2 - 2.0 * self.radius * w0
-        disc = b * b - 4.0 * a * c
-        sq = np.sqrt(np.maximum(disc, 0.0))
-        q = -0.5 * (b + np.where(b >= 0, sq, -sq))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            linear = np.abs(a) < 1e-14
-            t1 = np.where(linear, -c / b, q / a)
-            t2 = np.where(linear, np.inf, c / q)
-        best = np.full(np.broadcast_shapes(a.shape, b.shape), np.inf if not far else -np.inf)
+        disc, t1, t2 = _roots(self, pc, uc)
+        best = np.full(disc.shape, -np.inf)
         for t in (t1, t2):
             hit = (disc >= 0) & np.isfinite(t) & (t > EPS_T)
             hit &= self.on_cap(p + np.where(hit, t, 0.0)[..., None] * u)
-            better = (t < best) if not far else (t > best)
-            best = np.where(hit & better, t, best)
+            best = np.where(hit & (t > best), t, best)
         valid = np.isfinite(best)
-        return np.where(valid, best, np.nan), valid
+        best = np.where(valid, best, np.nan)
+        return (best[0], valid[0]) if scalar else (best, valid)
 
 
-def nearest_hit(c: Conic, p: Vec, u: Vec) -> tuple[np.ndarray, np.ndarray]:
-    """`Conic.intersect` (nearest t > 0 on the cap) on component arrays p = (x, y, z), u: (t, 0 where there is no
-    hit; valid).
-
-    The roots of the module docstring's quadratic and the cap test of `Conic.on_cap`, nearer root first: where the
-    nearer root hits it is the answer, and only the other elements (rays that miss or meet the far sheet first)
-    test the farther root. `fused.trace_conic` traces with it too."""
+def _roots(c: Conic, p: Vec, u: Vec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The discriminant and the two roots t of the module docstring's quadratic for the ray p + t u (components),
+    in the numerically stable form (q = -(b + sign(b) sqrt(disc)) / 2, t = q / a and c / q)."""
     k = 1.0 + c.conic
     w0 = c.apex - p[2]
     a = u[0] ** 2 + u[1] ** 2 + k * u[2] ** 2
@@ -146,6 +132,18 @@ def nearest_hit(c: Conic, p: Vec, u: Vec) -> tuple[np.ndarray, np.ndarray]:
         linear = np.abs(a) < 1e-14
         t1 = np.where(linear, -cc / b, q / a)
         t2 = np.where(linear, np.inf, cc / q)
+    return disc, t1, t2
+
+
+def nearest_hit(c: Conic, p: Vec, u: Vec) -> tuple[np.ndarray, np.ndarray]:
+    """`Conic.intersect` (nearest t > 0 on the cap) on component arrays p = (x, y, z), u: (t, 0 where there is no
+    hit; valid).
+
+    The roots of the module docstring's quadratic and the cap test of `Conic.on_cap`, nearer root first: where the
+    nearer root hits it is the answer, and only the other elements (rays that miss or meet the far sheet first)
+    test the farther root. `fused.trace_conic` traces with it too."""
+    disc, t1, t2 = _roots(c, p, u)
+    with np.errstate(invalid="ignore"):
         near, far = np.fmin(t1, t2), np.fmax(t1, t2)  # a NaN root leaves the other in both
     real = disc >= 0
     shape = near.shape
