@@ -467,8 +467,11 @@ def test_the_scatter_conditions_tell_feature_noise_from_eye_and_head_movement(sc
     def scatter(name=None, **values):
         applied = [] if name is None else [Applied.of(effects.get(name), values)]
         c = feature_conditions(simulate_with(eyes, scene, applied, rng=np.random.default_rng(0)))
-        return np.mean(c["spacing_sd:central"]), np.mean(c["pgv_sd:central"])
+        return np.mean(c["spacing_sd:central"]), np.mean(c["pgv_sd:central"]), np.mean(c["spacing_perp_sd:central"])
 
     base, noise, rotation = scatter(), scatter("feature_noise", sigma_px=0.2), scatter("fixation_error", sigma_deg=0.5)
-    assert noise[0] > 1.3 * base[0] and noise[1] > 1.3 * base[1]
+    assert noise[0] > 1.3 * base[0] and noise[1] > 1.3 * base[1] and noise[2] > 1.3 * base[2]
     assert abs(rotation[0] - base[0]) < 0.1 * base[0] and rotation[1] > 1.3 * base[1]
+    head = scatter("head_jitter", sigma_mm=6.0)  # nearer or farther: the glints' vector scales, it does not turn
+    assert head[0] > 1.3 * base[0] and abs(head[2] - base[2]) < 0.1 * base[2]
+    assert abs(rotation[2] - base[2]) < 0.1 * base[2]

@@ -21,6 +21,10 @@ than the first is compared within subjects to the first, like the gaze condition
 - `spacing_sd:<h>`: the SD over targets of the glint spacing about its least-squares plane in the target's screen
   x and y (px): per-fixation noise on each glint centre shows here, an eye rotation or a head movement, which move
   the glints together, barely;
+- `spacing_perp_sd:<h>`: the same for the component of the vector from the last glint to the first across its mean
+  direction (px): noise on each glint centre turns that vector; a head movement (nearer or farther, which scales it)
+  and an eye rotation (which moves both glints) barely do, so feature noise cannot be mimicked here by a fixation
+  error with head jitter. With one LED both spacing conditions are 0;
 - `pgv_sd:<h>`: the SD over targets of the pupil-glint vector about its least-squares planes in x and y (px, x and
   y pooled): per-fixation scatter of the features, of the gaze (fixation error) and of the head.
 
@@ -42,7 +46,7 @@ from eyehil.emulator.features import Features, empty_features
 from eyehil.emulator.scene import Scene, load_scene
 
 QUANTITIES = ("pgv_x", "pgv_y", "gain_x", "gain_y", "glint_spacing", "pupil_major", "pupil_ratio", "spacing_sd",
-              "pgv_sd")
+              "spacing_perp_sd", "pgv_sd")
 DETECTED, GLINT_VALID = 0x01, 0x01
 
 
@@ -54,7 +58,13 @@ def feature_conditions(features: Features, side: str = "right") -> dict[str, np.
     glints = np.where(valid[..., None, None], features.glint_px[:, s], np.nan)
     axes = np.where(valid[..., None], features.pupil_axes_px[:, s], np.nan)
     pgv = pupil - glints.mean(axis=-2)
-    spacing = np.linalg.norm(glints[..., 0, :] - glints[..., -1, :], axis=-1)
+    between = glints[..., 0, :] - glints[..., -1, :]
+    spacing = np.linalg.norm(between, axis=-1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        along = np.nanmean(between, axis=-2, keepdims=True)  # (E, H, 1, 2): the mean direction per head position
+        along = along / np.maximum(np.linalg.norm(along, axis=-1, keepdims=True), 1e-12)
+    across = between[..., 1] * along[..., 0] - between[..., 0] * along[..., 1]
     tx, ty = (features.targets[:, i] - features.targets[:, i].mean() for i in (0, 1))
     plane = np.stack([np.ones_like(tx), tx, ty], axis=-1)  # (T, 3): the scatter conditions' least-squares plane
     out = {}
@@ -74,6 +84,7 @@ def feature_conditions(features: Features, side: str = "right") -> dict[str, np.
             out[f"pupil_major:{name}"] = np.nanmean(axes[:, h, :, 0], axis=-1)
             out[f"pupil_ratio:{name}"] = np.nanmean(axes[:, h, :, 1] / axes[:, h, :, 0], axis=-1)
             out[f"spacing_sd:{name}"] = np.sqrt(_plane_residual(spacing[:, h], plane))
+            out[f"spacing_perp_sd:{name}"] = np.sqrt(_plane_residual(across[:, h], plane))
             ssr_x, ssr_y = (_plane_residual(pgv[:, h, :, c], plane) for c in (0, 1))
             out[f"pgv_sd:{name}"] = np.sqrt(0.5 * (ssr_x + ssr_y))
     return out
