@@ -33,7 +33,7 @@ interaction D0 - D_all - sum_i (D0 - D_i) (0 when their contributions add; compu
 
 Whether the data can tell the candidates apart: each round's `rivals` are the other effects whose fit is as good
 as the added one's (D + 2k within `RIVAL_SCORE`, the rule of thumb for two AICs: Burnham & Anderson 2002,
-"Model selection and multimodel inference", section 2.6); `summary.json` lists them per named effect.
+"Model selection and multimodel inference", section 2.6); `summary.json` lists them per added effect.
 
 `hidden_measured` makes "measured" data by simulating other eyes with hidden effects, for testing the
 workflow blind (tests/test_discrepancy*.py, `eyehil discrepancy --hidden`).
