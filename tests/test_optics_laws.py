@@ -152,7 +152,7 @@ def test_ellipse_fit_of_noisy_points_is_the_least_squares_eigenvector() -> None:
     pts = np.column_stack([40 + 9 * np.cos(th), 30 + 4 * np.sin(th)])[None] + rng.normal(0, 0.5, (50, 20, 2))
     e = fit_ellipse(pts)
     for k in range(50):
-        x, y = ((pts[k] - pts[k].mean(axis=0)) / 1.0).T
+        x, y = (pts[k] - pts[k].mean(axis=0)).T
         d1, d2 = np.column_stack([x * x, x * y, y * y]), np.column_stack([x, y, np.ones_like(x)])
         t = -np.linalg.solve(d2.T @ d2, d2.T @ d1)
         m = np.array([[0, 0, 0.5], [0, -1, 0], [0.5, 0, 0]]) @ (d1.T @ d1 + d1.T @ d2 @ t)

@@ -60,16 +60,14 @@ def feature_conditions(features: Features, side: str = "right") -> dict[str, np.
     pgv = pupil - glints.mean(axis=-2)
     between = glints[..., 0, :] - glints[..., -1, :]
     spacing = np.linalg.norm(between, axis=-1)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        along = np.nanmean(between, axis=-2, keepdims=True)  # (E, H, 1, 2): the mean direction per head position
-        along = along / np.maximum(np.linalg.norm(along, axis=-1, keepdims=True), 1e-12)
-    across = between[..., 1] * along[..., 0] - between[..., 0] * along[..., 1]
     tx, ty = (features.targets[:, i] - features.targets[:, i].mean() for i in (0, 1))
     plane = np.stack([np.ones_like(tx), tx, ty], axis=-1)  # (T, 3): the scatter conditions' least-squares plane
     out = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
+        along = np.nanmean(between, axis=-2, keepdims=True)  # (E, H, 1, 2): the mean direction per head position
+        along = along / np.maximum(np.linalg.norm(along, axis=-1, keepdims=True), 1e-12)
+        across = between[..., 1] * along[..., 0] - between[..., 0] * along[..., 1]
         for h, head in enumerate(features.head_positions):
             name = getattr(head, "name", str(h))
             out[f"pgv_x:{name}"] = np.nanmean(pgv[:, h, :, 0], axis=-1)

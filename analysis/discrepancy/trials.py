@@ -131,7 +131,8 @@ def score(record: dict, result, hidden) -> dict:
     elif hidden:
         out["named"] = bool(named) and named[0] == truth[0] and record["outcome"] == "explained"
     out["added_nothing"] = not result.added
-    rivals = {n for names in record.get("rivals", {}).values() for n in names} | set(record.get("rivals", {}))
+    by_added = record.get("rivals", {})  # added effect -> its rivals
+    rivals = set(by_added).union(*by_added.values())
     out["hidden_among_rivals"] = [name in rivals for name in truth]
     covered = []
     for a in hidden:

@@ -87,8 +87,8 @@ def _constrained_eigenvector(r: np.ndarray) -> np.ndarray:
     """
     r00, r01, r02, r11, r12, r22 = r[..., 0, 0], r[..., 0, 1], r[..., 0, 2], r[..., 1, 1], r[..., 1, 2], r[..., 2, 2]
     det = r00 * (r11 * r22 - r12 * r12) - r01 * (r01 * r22 - r12 * r02) + r02 * (r01 * r12 - r11 * r02)
-    coef = (np.full_like(det, -4.0), 4 * (r02 - r11), r00 * r22 - 4 * r01 * r12 - r02 * r02 + 4 * r11 * r02, det)
-    a, b, c = (k / coef[0] for k in coef[1:])  # monic: lam^3 + a lam^2 + b lam + c
+    coef = (-4.0, 4 * (r02 - r11), r00 * r22 - 4 * r01 * r12 - r02 * r02 + 4 * r11 * r02, det)
+    a, b, c = (k / -4.0 for k in coef[1:])  # monic: lam^3 + a lam^2 + b lam + c
     p, q = b - a * a / 3, 2 * a**3 / 27 - a * b / 3 + c
     p = np.minimum(p, -1e-300)  # three real roots: p < 0
     arg = np.clip(1.5 * q / p * np.sqrt(-3 / p), -1.0, 1.0)

@@ -24,9 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from eyehil.emulator.optics.biconic import MAX_NEWTON, SURFACE_TOLERANCE_MM, Biconic, guide_roots, sag
-from eyehil.emulator.optics.conic import EPS_T, Conic, Plane, nearest_hit
+from eyehil.emulator.optics.conic import EPS_T, Conic, Plane, Vec, nearest_hit
 
-Vec = tuple[np.ndarray, np.ndarray, np.ndarray]
 #: the fraction of a batch still moving below which the posterior Newton iterates on those elements alone
 STRAGGLERS = 0.1
 
