@@ -164,6 +164,19 @@ def test_search_recovers_a_known_quadratic_minimum_and_its_curvature() -> None:
     assert fit2.sigma["nasal_mm"] == pytest.approx(np.sqrt(2 * (2 / 3) / 100), rel=1e-3)
 
 
+def test_search_zooms_on_a_parameter_pinned_finer_than_its_last_step() -> None:
+    def sharp(batch):  # a broad bowl with a well of width 0.1 deg at 2.71 deg: D rises ~950 within step/16
+        x = np.array([a.values["roll_deg"] for a in batch])
+        d = 3 + 2 * (x - 2.71) ** 2 + 1000 * (1 - np.exp(-((x - 2.71) ** 2) / (2 * 0.1**2)))
+        return [{"D": np.array([v])} for v in d]
+
+    fit = search_effects([effects.get("head_roll")], sharp, lambda m: m["D"][:, 0], D0=2000.0, n_conditions=7)[0]
+    # without the zoom the parabola over +-0.25 deg ends 0.033 deg off, at D = 56
+    assert fit.values["roll_deg"] == pytest.approx(2.71, abs=1e-3) and fit.D < 3.01
+    assert fit.sigma["roll_deg"] == pytest.approx(np.sqrt(2 / (4 + 1000 / 0.1**2)), rel=0.01)
+    assert len(fit.points) <= max_evaluations(fit.effect)
+
+
 def test_search_screens_many_effects_and_refines_only_the_best() -> None:
     def bowl(batch):  # only head_roll can reach D = 2; the others stay near 50
         out = []

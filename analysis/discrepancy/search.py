@@ -18,6 +18,11 @@ call (one batched calibration for every effect's points). Per effect, with P = 1
    its minimum (kept within that window and the range) is evaluated; the best evaluated point is the
    estimate. The curvature gives a 1-sigma uncertainty sqrt(diag(2 H_theta^-1)) (Delta D = 1, D read as
    a chi-square); NaN if the parabola is not convex or its minimum is on a bound.
+   Zoom: where that sigma is below h / `ZOOM_RATIO` (a parameter the data pin down far more finely than the
+   last step, so D rises by more than `ZOOM_RATIO`^2 within one step and a parabola over the step misplaces
+   the minimum), the refinement and the quadratic are repeated with h = max(2 sigma, h / 8) for that
+   parameter, up to `ZOOM` times (a 1-sigma miss of a sharp parameter costs Delta D = 1, which the show eyes'
+   tests can see).
 4. Alternatives: nodes more than 1.5 node steps away whose D is within 1 of the best (e.g. the mirror sign
    of an effect that only error magnitudes see): the data cannot tell them apart.
 
@@ -50,6 +55,7 @@ from eyehil.emulator.effects import Applied, Effect
 NODES = {1: 5, 2: 3}
 DENSE = {1: 65, 2: 25}
 REFINE = (2, 3, 4)  # refinement steps h = step / 2**r
+ZOOM, ZOOM_RATIO = 2, 4.0  # zoomed refinements at most, and when (module docstring, 3.)
 TOP = 3
 EDGE = 0.01
 
@@ -146,6 +152,8 @@ class EffectSearch:
         self.coarse = np.array(list(itertools.product(*self.axes)))
         self.points, self.Ds = np.empty((0, len(params))), np.empty(0)
         self.stage, self.sigma = 0, np.full(len(params), np.nan)
+        self._plan: list[tuple[str, np.ndarray]] = []  # refinements and quadratics still to run, with their h
+        self._h, self.zooms = self.step / 2 ** REFINE[-1], 0
         self.surrogate: tuple[np.ndarray, float] | None = None
         self.node_metrics: list[Metrics] = []
         self._pending: np.ndarray | None = self.coarse
@@ -181,20 +189,30 @@ class EffectSearch:
         """Leave the screen: evaluate the surrogate optimum, then refine."""
         self.screened = False
         self.stage = 1
+        self._plan = [*(("refine", self.step / 2 ** r) for r in REFINE), ("quadratic", self._h)]
         start = self.surrogate[0] if self.surrogate is not None else self.best
         self._pending = self._new(np.clip(start, self.lo, self.hi)[None])
         if self._pending is None:
             self._advance()
 
     def _advance(self) -> None:
-        """Stages: 0 screen, 1 surrogate optimum, 2.. refinements, then the quadratic's minimum."""
-        while self._pending is None and self.stage <= len(REFINE) + 1:
-            self.stage += 1
-            r = self.stage - 2
-            if r < len(REFINE):
-                self._pending = self._refinement(self.step / 2 ** REFINE[r])
-            else:
-                self._pending = self._quadratic()
+        """The next task of the plan (refinements, then the quadratic's minimum), then zooms while they pay."""
+        while self._pending is None:
+            if not self._plan:
+                h = self._zoom()
+                if h is None:
+                    return
+                self.zooms += 1
+                self._plan = [("refine", h), ("quadratic", h)]
+            task, h = self._plan.pop(0)
+            self._pending = self._refinement(h) if task == "refine" else self._quadratic(h)
+
+    def _zoom(self) -> np.ndarray | None:
+        """The next zoom's h (module docstring, 3.), or None: no zoom left or none needed."""
+        sharp = np.isfinite(self.sigma) & (self.sigma < self._h / ZOOM_RATIO)
+        if self.zooms >= ZOOM or not sharp.any():
+            return None
+        return np.where(sharp, np.maximum(2.0 * np.nan_to_num(self.sigma), self._h / 8), self._h)
 
     def _refinement(self, h: np.ndarray) -> np.ndarray | None:
         offsets = np.array(list(itertools.product((-1.0, 0.0, 1.0), repeat=len(h))))
@@ -205,9 +223,11 @@ class EffectSearch:
         new = [c for c in cand if not np.any(np.all(np.isclose(self.points, c, atol=1e-12), axis=1))]
         return np.array(new) if new else None
 
-    def _quadratic(self) -> np.ndarray | None:
-        h = self.step / 2 ** REFINE[-1]
-        estimate, self.sigma = quadratic_minimum(self.points, self.Ds, self.best, h, self.lo, self.hi)
+    def _quadratic(self, h: np.ndarray) -> np.ndarray | None:
+        estimate, sigma = quadratic_minimum(self.points, self.Ds, self.best, h, self.lo, self.hi)
+        if estimate is None and self.zooms:
+            return None  # a zoom's parabola failed: the coarser one's sigma stands
+        self.sigma, self._h = sigma, h
         return None if estimate is None else self._new(estimate[None])
 
     def result(self) -> EffectFit:
@@ -301,9 +321,9 @@ def quadratic_minimum(points, Ds, best, h, lo, hi) -> tuple[np.ndarray | None, n
 
 def max_evaluations(effect: Effect, refined: bool = True) -> int:
     """Evaluations of one effect's search at most: nodes, and if refined the surrogate optimum, the
-    refinements and the quadratic's minimum."""
+    refinements, the quadratic's minimum and the zooms."""
     P = len(effect.fitted)
-    return NODES[P] ** P + (1 + len(REFINE) * (3**P - 1) + 1 if refined else 0)
+    return NODES[P] ** P + (1 + (len(REFINE) + ZOOM) * (3**P - 1) + 1 + ZOOM if refined else 0)
 
 
 def search_effects(effects: Sequence[Effect], evaluate: Callable[[list[Applied]], list[Metrics]],
