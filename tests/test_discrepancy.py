@@ -221,6 +221,31 @@ def test_rivals_are_the_candidates_that_fit_as_well_as_the_added_effect() -> Non
     assert Round(None, [added, close], None, "").rivals == []  # type: ignore[arg-type]
 
 
+def test_a_round_adds_its_best_of_many_null_candidates_at_the_family_wise_level() -> None:
+    """With nothing left to explain, each candidate's drop of D is chi-square(k) (Wilks); the best of 21 passes
+    a per-candidate 95 % test in most rounds (1 - 0.95^21 = 66 %), and the Bonferroni level of `add_level` holds the
+    rate of spurious additions at 5 %."""
+    from eyehil.analysis.discrepancy.search import EffectFit
+    from eyehil.analysis.discrepancy.workflow import add_level, choose
+
+    rng = np.random.default_rng(5)
+    chosen = [effects.get(n) for n in effects.names()][:21]
+    added = per_candidate = 0
+    rounds = 2000
+    for _ in range(rounds):
+        fits = []
+        for e in chosen:  # D0 = n - k: the model fits, the scale factor is 1
+            D = 400.0 - rng.chisquare(len(e.fitted))
+            fits.append(EffectFit(e, {p.name: p.neutral + 1e-3 for p in e.fitted}, {}, D, 400.0, 400,
+                                  np.zeros((1, len(e.fitted))), np.array([D])))
+        fits.sort(key=lambda f: f.score)
+        added += choose(None, fits).added is not None  # type: ignore[arg-type]
+        per_candidate += fits[0].passes()
+    assert add_level(len(chosen)) == pytest.approx(1 - 0.05 / 21)
+    assert per_candidate / rounds > 0.3  # the uncorrected test adds a spurious effect in a third of the rounds
+    assert added / rounds < 0.05 + 3 * np.sqrt(0.05 * 0.95 / rounds)
+
+
 def test_permutation_tests_hold_their_level_on_four_skewed_subjects() -> None:
     rng = np.random.default_rng(3)
     hits = 0

@@ -35,15 +35,16 @@ def _json(value: Any) -> Any:
     raise TypeError(f"not JSON serialisable: {type(value)}")
 
 
-def _fit_dict(f: EffectFit) -> dict[str, Any]:
+def _fit_dict(f: EffectFit, level: float) -> dict[str, Any]:
     return {"effect": f.effect.name, "values": f.values, "sigma": f.sigma, "ci95": f.ci95, "D": f.D, "D0": f.D0,
-            "explained": f.explained, "score": f.score, "lowers": f.lowers(), "at_edge": f.at_edge,
-            "passes": f.passes(), "gof_p": f.gof_p, "screened_only": f.screened, "alternatives": f.alternatives,
+            "explained": f.explained, "score": f.score, "lowers": f.lowers(level), "at_edge": f.at_edge,
+            "passes": f.passes(level), "gof_p": f.gof_p, "screened_only": f.screened, "alternatives": f.alternatives,
             "evaluations": len(f.points)}
 
 
 def to_dict(result: DiscrepancyResult) -> dict[str, Any]:
-    rounds = [{"before": r.before.to_dict(), "verdict": r.verdict, "ranking": [_fit_dict(f) for f in r.fits],
+    rounds = [{"before": r.before.to_dict(), "verdict": r.verdict, "level": r.level,
+               "ranking": [_fit_dict(f, r.level) for f in r.fits],
                "added": r.added.effect.name if r.added else None} for r in result.rounds]
     inter = result.interactions
     return {"settings": result.settings, "source": result.measured.source, "summary": result.summary(),
@@ -83,12 +84,14 @@ def _round(i: int, r: Round) -> list[str]:
     lines = [f"### Round {i}", "", f"Find (D = {r.before.D:.2f} over {len(r.before.gaps)} conditions):", "",
              *_gaps_table(r.before), ""]
     if r.fits:
-        lines += ["Name (every candidate effect screened, the best refined; ranked by D + 2k):", "",
+        lines += [f"Name (every candidate effect screened, the best refined; ranked by D + 2k; passes: lowers D past "
+                  f"the chi-square(k) point at {100 * r.level:.2f} %, Bonferroni over {len(r.fits)} candidates, "
+                  "and no parameter at a range edge):", "",
                   _row("rank", "effect", "fitted (+- 1 sigma)", "D", "D0 - D", "explained", "D + 2k", "GOF p",
                        "passes", "also fits"), _row(*["---"] * 10)]
         for k, f in enumerate(r.fits, start=1):
             also = "; ".join(", ".join(f"{n} {v:.3g}" for n, v in a.items()) for a in f.alternatives) or "-"
-            verdict = "yes" if f.passes() else ("edge" if f.lowers() and f.at_edge else "no")
+            verdict = "yes" if f.passes(r.level) else ("edge" if f.lowers(r.level) and f.at_edge else "no")
             lines.append(_row(k, f.effect.name, _fitted(f), f"{f.D:.2f}", f"{f.reduction:.2f}",
                               f"{100 * f.explained:.0f} %", f"{f.score:.2f}", f"{f.gof_p:.2g}", verdict, also))
         lines.append("")

@@ -11,8 +11,10 @@ add them to the model, and show the gap shrink, or say that no known effect expl
    (not only those that lowered D in round 1: that hides a pair's smaller effect, whose drop of D in round 1
    is scaled down by the larger one's misfit).
 3. add: the top-ranked effect joins the model at its fitted values if it lowers D by more than the
-   chi-square(k) 95 % point (after the misfit scale factor) and no fitted parameter is at the edge of its
-   plausible range (`EffectFit.passes`). Otherwise nothing is added and the round says why.
+   chi-square(k) point at level 1 - `ALPHA_ADD` / n (after the misfit scale factor; `add_level`: Bonferroni over
+   the n candidates fitted in the round, for the best of n is chosen after seeing the data) and no fitted
+   parameter is at the edge of its plausible range (`EffectFit.passes`). Otherwise nothing is added and the
+   round says why.
    Steps 1-3 repeat for up to `rounds` rounds (a second effect is fitted with the first in the model).
    With two or more effects added, each is refitted with the others in the model (`_backfit`).
 4. show (`run_discrepancy`): the comparison before and after, on the (usually larger) show eyes.
@@ -47,6 +49,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
+import scipy.stats as sps
 
 from eyehil.analysis.discrepancy.data import Measured, MeasuredCondition
 from eyehil.analysis.discrepancy.metrics import Evaluator
@@ -58,8 +61,16 @@ from eyehil.emulator.eye.model import EyeModel
 from eyehil.parallel import worker_pool
 
 ALPHA_GOF = 0.01
+ALPHA_ADD = 0.05  # family-wise level of a round's addition, over its candidates (`add_level`)
 RIVAL_SCORE = 2.0  # D + 2k within this of the added effect's: a rival the data cannot tell from it (`Round.rivals`)
 CHUNK = 12  # points per evaluation call (each a batched calibration)
+
+
+def add_level(n_candidates: int) -> float:
+    """The chi-square level the best of a round's `n_candidates` fits must pass to be added: 1 - ALPHA_ADD / n
+    (Bonferroni). The best is picked after seeing the data, so testing it at 95 % alone adds a spurious
+    effect in up to n x 5 % of rounds that have nothing left to explain."""
+    return 1.0 - ALPHA_ADD / max(1, n_candidates)
 
 
 def _evaluations(chosen: Sequence[Effect]) -> int:
@@ -95,16 +106,18 @@ class Round:
     fits: list[EffectFit]  # ranked, best first
     added: EffectFit | None
     verdict: str
+    level: float = 0.95  # the addition's chi-square level (`add_level`)
 
     @property
     def rivals(self) -> list[str]:
         """The other candidates the data cannot tell from the added effect: each lowers D significantly too
-        (`EffectFit.lowers`) and its D + 2k is within `RIVAL_SCORE` of the added one's. Those only screened
-        carry the surrogate's D, which a refinement would lower further, so the list errs on the short side."""
+        (`EffectFit.lowers` at the round's `level`) and its D + 2k is within `RIVAL_SCORE` of the added one's.
+        Those only screened carry the surrogate's D, which a refinement would lower further, so the list errs on
+        the short side."""
         if self.added is None:
             return []
         return [f.effect.name for f in self.fits
-                if f is not self.added and f.lowers() and f.score - self.added.score <= RIVAL_SCORE]
+                if f is not self.added and f.lowers(self.level) and f.score - self.added.score <= RIVAL_SCORE]
 
 
 @dataclass(frozen=True)
@@ -305,8 +318,14 @@ def _round(search: Evaluator, measured: Measured, effect_names, alpha, progress,
     progress.stage(f"{label}: fitting {len(chosen)} effects", _evaluations(chosen))
     fits = name_effects(search, measured, before, effect_names, alpha, progress) \
         if effect_names is None or len(effect_names) else []
-    best = fits[0] if fits and fits[0].passes() else None
-    return Round(before, fits, best, _verdict(best, fits))
+    return choose(before, fits)
+
+
+def choose(before: Comparison, fits: list[EffectFit]) -> Round:
+    """Step 3 on a round's ranked fits: the best is added if it passes at the round's `add_level`."""
+    level = add_level(len(fits))
+    best = fits[0] if fits and fits[0].passes(level) else None
+    return Round(before, fits, best, _verdict(best, fits, level), level)
 
 
 def _backfit(initial: Evaluator, search: Evaluator, measured: Measured, added: list[Applied],
@@ -331,17 +350,18 @@ def _backfit(initial: Evaluator, search: Evaluator, measured: Measured, added: l
     return added, fits, initial.with_base(added) if changed else search
 
 
-def _verdict(best: EffectFit | None, fits: list[EffectFit]) -> str:
+def _verdict(best: EffectFit | None, fits: list[EffectFit], level: float) -> str:
     if best is not None:
         return f"added {best.applied.label()}: D {best.D0:.1f} -> {best.D:.1f}"
     if not fits:
         return "no candidate effect left"
     top = fits[0]
-    if top.at_edge and top.lowers():
+    if top.at_edge and top.lowers(level):
         return (f"the best, {top.applied.label()}, ends at the edge of its plausible range ({', '.join(top.at_edge)}): "
                 "not added")
     return (f"the best, {top.applied.label()}, lowers D by {top.reduction:.2f}, "
-            f"{top.reduction / top.scale**2:.2f} after the misfit scale (needs > the chi-square({top.k}) 95 % point)")
+            f"{top.reduction / top.scale**2:.2f} after the misfit scale (needs > {sps.chi2.ppf(level, top.k):.2f}, "
+            f"the chi-square({top.k}) point at {100 * level:.2f} %, Bonferroni over {len(fits)} candidates)")
 
 
 def hidden_measured(hidden: Sequence[Applied], *, eyes: EyeModel, experiment: str = "guestrin2006",
