@@ -445,11 +445,12 @@ def test_cli_writes_the_report_and_reports_progress(tmp_path, capsys) -> None:
 
 
 def test_blind_trials_score_a_pair_in_the_order_of_each_effect_alone(hidden_eyes) -> None:
-    from eyehil.analysis.discrepancy.trials import score, sizes
+    from eyehil.analysis.discrepancy.trials import NONE, score, sizes
 
     big, small = effects.parse("pupil_change=-1.2"), effects.parse("feature_noise=0.02")
-    order = sizes([small, big], hidden_eyes, "guestrin2006", None, 5, published_eyes()[:SEARCH_EYES], 0)
-    assert order == ["pupil_change", "feature_noise"]
+    gaps = sizes([small, big], hidden_eyes, "guestrin2006", None, 5, published_eyes()[:SEARCH_EYES], 0)
+    assert gaps[big.effect.name] > gaps[small.effect.name] > gaps[NONE]  # each alone above the floor of no effect
+    order = ["pupil_change", "feature_noise"]
 
     class Result:
         shrink, added = 0.9, [big, small]

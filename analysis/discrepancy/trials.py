@@ -64,6 +64,9 @@ def model_eyes(kind: str, count: int, seed: int):
     return sample(count, np.random.default_rng(MODEL_SEED + seed)).eyes
 
 
+NONE = "(none)"  # the key of `sizes` for the data without hidden effects
+
+
 def trial(kind: str, index: int, *, experiment: str, search_eyes: int, show_eyes: int, hidden_eyes: int,
           seed: int, features: bool = False, model: str = "published") -> dict:
     from eyehil.analysis.discrepancy.workflow import hidden_measured, run_discrepancy
@@ -94,30 +97,36 @@ def trial(kind: str, index: int, *, experiment: str, search_eyes: int, show_eyes
     measured = hidden_measured(hidden, eyes=eyes, experiment=experiment, conditions=conditions,
                                seed=seed + 3 + index)
     show = model_eyes(model, max(show_eyes, search_eyes), seed)
-    order = sizes(hidden, eyes, experiment, conditions, seed + 3 + index, show[:search_eyes], seed) \
-        if len(hidden) == 2 else [a.effect.name for a in hidden]
+    gaps = sizes(hidden, eyes, experiment, conditions, seed + 3 + index, show[:search_eyes], seed) \
+        if len(hidden) == 2 else {}
+    named = [a.effect.name for a in hidden]
+    order = sorted(named, key=lambda name: -gaps[name]) if gaps else named
     start = time.perf_counter()
     result = run_discrepancy(measured, eyes=show[:show_eyes], search_eyes=show[:search_eyes],
                              effect_names=allowed, rounds=2, seed=seed)
     record = {"kind": kind, "index": index, "experiment": experiment, "features": features, "model_eyes": model,
               "hidden": [a.label() for a in hidden], "hidden_order": order,
+              "sizes": gaps,
               "hidden_values": {a.effect.name: dict(a.values) for a in hidden}, "seconds": time.perf_counter() - start,
               **result.summary()}
     return {**record, **score(record, result, hidden)}
 
 
-def sizes(hidden, eyes, experiment: str, conditions, noise_seed: int, search_eyes, seed: int) -> list[str]:
-    """The hidden effects' names from the largest: by D of data with each alone (the same hidden eyes and noise
-    seed as the trial's data) against the model without effects on the search eyes."""
+def sizes(hidden, eyes, experiment: str, conditions, noise_seed: int, search_eyes, seed: int) -> dict[str, float]:
+    """D of data with each hidden effect alone (the same hidden eyes and noise seed as the trial's data) against the
+    model without effects on the search eyes, by effect name; and under "(none)" the D of the same data with no
+    effect, the floor from the eyes and the noise alone, against which an effect's own size shows."""
     from eyehil.analysis.discrepancy.metrics import Evaluator
     from eyehil.analysis.discrepancy.stats import compare
     from eyehil.analysis.discrepancy.workflow import hidden_measured
 
     base = Evaluator(experiment, search_eyes, seed=seed)
-    gaps = {a.effect.name: compare(base.base_metrics, hidden_measured([a], eyes=eyes, experiment=experiment,
-                                                                     conditions=conditions, seed=noise_seed),
-                                   base.experiment.reference, tests=False).D for a in hidden}
-    return sorted(gaps, key=lambda name: -gaps[name])
+
+    def gap(applied: list) -> float:
+        data = hidden_measured(applied, eyes=eyes, experiment=experiment, conditions=conditions, seed=noise_seed)
+        return compare(base.base_metrics, data, base.experiment.reference, tests=False).D
+
+    return {**{a.effect.name: gap([a]) for a in hidden}, NONE: gap([])}
 
 
 def score(record: dict, result, hidden) -> dict:
