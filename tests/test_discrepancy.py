@@ -401,6 +401,25 @@ def test_two_hidden_effects_are_named_in_order_of_size(hidden_eyes) -> None:
     assert added["pupil_change"]["delta_diameter_mm"] == pytest.approx(-0.7, abs=0.1)
 
 
+def test_the_last_rounds_contenders_are_backfitted_in_its_place_and_the_best_kept(hidden_eyes) -> None:
+    from eyehil.analysis.discrepancy.workflow import RIVAL_SCORE
+
+    hidden = [effects.parse("lens_distortion=-1.9"), effects.parse("pupil_decentre=-0.3,-0.2")]
+    measured = hidden_measured(hidden, eyes=hidden_eyes, seed=5)
+    names = ["lens_distortion", "pupil_decentre", "cornea_decentre", "feature_noise"]
+    result = run_discrepancy(measured, eyes=published_eyes()[:SEARCH_EYES], effect_names=names, rounds=2, workers=2)
+    last = result.rounds[-1]
+    ranked = [f.effect.name for f in last.fits]
+    assert ranked[0] == "cornea_decentre"  # the round, with the first fit's lens distortion, ranks the mimic first
+    assert set(last.backfitted) == {"cornea_decentre", "pupil_decentre"}  # feature_noise is not close
+    kept = min(last.backfitted, key=last.backfitted.get)
+    assert kept == "pupil_decentre" == last.added.effect.name == result.added[-1].effect.name
+    assert result.final.D + 2 * result.k_total == pytest.approx(last.backfitted[kept])
+    close = last.backfitted["cornea_decentre"] - last.backfitted[kept] <= RIVAL_SCORE
+    assert result.summary()["rivals"]["pupil_decentre"] == (["cornea_decentre"] if close else [])
+    assert "fits better in its place" in last.verdict
+
+
 def test_recordings_round_trip_and_a_hidden_effect_is_named_from_them(tmp_path, hidden_eyes) -> None:
     hidden = effects.parse("pupil_change=-0.7")
     evaluator = Evaluator("guestrin2006", hidden_eyes, base=[hidden], seed=5)

@@ -96,6 +96,9 @@ def _round(i: int, r: Round) -> list[str]:
                               f"{100 * f.explained:.0f} %", f"{f.score:.2f}", f"{f.gof_p:.2g}", verdict, also))
         lines.append("")
     lines.append(f"Verdict: {r.verdict}.")
+    if r.backfitted:
+        lines.append("Backfitted in the added effect's place, the whole model's D + 2k: "
+                     + "; ".join(f"{n} {v:.2f}" for n, v in sorted(r.backfitted.items(), key=lambda kv: kv[1])) + ".")
     if r.rivals:
         lines.append(f"The data cannot tell {r.added.effect.name} from {', '.join(r.rivals)}: D + 2k within "
                      f"{RIVAL_SCORE:g} of its own.")

@@ -16,7 +16,13 @@ add them to the model, and show the gap shrink, or say that no known effect expl
    parameter is at the edge of its plausible range (`EffectFit.passes`). Otherwise nothing is added and the
    round says why.
    Steps 1-3 repeat for up to `rounds` rounds (a second effect is fitted with the first in the model).
-   With two or more effects added, each is refitted with the others in the model (`_backfit`).
+   With two or more effects added, each is refitted with the others in the model (`_backfit`), and so are the
+   last round's close contenders (`_contend`): up to `CONTENDERS` refined fits that lower D and score within
+   `CONTEND` of the added one, each backfitted in place of the last added effect. The first effect was fitted
+   while the second's gap was still open, so the round ranks the second's candidates against a biased first
+   (a pupil decentration behind a corneal one, 93 against 76, that tie at 64 and 63 once the lens distortion
+   fitted before them is refitted); the backfitted model of lowest D + 2k is kept, and the others within
+   `RIVAL_SCORE` of it are its rivals.
 4. show (`run_discrepancy`): the comparison before and after, on the (usually larger) show eyes.
 
 The **outcome** (`DiscrepancyResult.outcome`) is decided by a stated criterion:
@@ -45,7 +51,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from contextlib import nullcontext
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 import numpy as np
@@ -63,6 +69,8 @@ from eyehil.parallel import worker_pool
 ALPHA_GOF = 0.01
 ALPHA_ADD = 0.05  # family-wise level of a round's addition, over its candidates (`add_level`)
 RIVAL_SCORE = 2.0  # D + 2k within this of the added effect's: a rival the data cannot tell from it (`Round.rivals`)
+CONTEND = 30.0  # D + 2k within this of the last added effect's in its round: backfitted in its place (`_contend`)
+CONTENDERS = 2  # at most this many contenders backfitted
 CHUNK = 12  # points per evaluation call (each a batched calibration)
 
 
@@ -107,15 +115,19 @@ class Round:
     added: EffectFit | None
     verdict: str
     level: float = 0.95  # the addition's chi-square level (`add_level`)
+    backfitted: dict[str, float] | None = None  # D + 2k of the whole model backfitted with each (`_contend`)
 
     @property
     def rivals(self) -> list[str]:
         """The other candidates the data cannot tell from the added effect: each lowers D significantly too
-        (`EffectFit.lowers` at the round's `level`) and its D + 2k is within `RIVAL_SCORE` of the added one's.
-        Those only screened carry the surrogate's D, which a refinement would lower further, so the list errs on
-        the short side."""
+        (`EffectFit.lowers` at the round's `level`) and its D + 2k is within `RIVAL_SCORE` of the added one's;
+        after a backfit of contenders, D + 2k of the backfitted models. Those only screened carry the surrogate's
+        D, which a refinement would lower further, so the list errs on the short side."""
         if self.added is None:
             return []
+        if self.backfitted:
+            best = self.backfitted[self.added.effect.name]
+            return [n for n, v in self.backfitted.items() if n != self.added.effect.name and v - best <= RIVAL_SCORE]
         return [f.effect.name for f in self.fits
                 if f is not self.added and f.lowers(self.level) and f.score - self.added.score <= RIVAL_SCORE]
 
@@ -248,6 +260,8 @@ def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel
         backfitted = len(added) > 1
         if backfitted:
             added, fits, search = _backfit(initial, search, measured, added, fits, alpha, progress)
+            done[-1], added, fits, search = _contend(initial, search, measured, done[-1], added, fits, alpha,
+                                                     progress)
         # the last round's own comparison is the final model's unless that round or the backfit changed the model
         final = find(search, measured, alpha) if backfitted or done[-1].added is not None else done[-1].before
         interactions = None
@@ -348,6 +362,37 @@ def _backfit(initial: Evaluator, search: Evaluator, measured: Measured, added: l
         if current > fit.D and not fit.at_edge:
             added[j], fits[j], current, changed = fit.applied, fit, fit.D, True
     return added, fits, initial.with_base(added) if changed else search
+
+
+def _contend(initial: Evaluator, search: Evaluator, measured: Measured, last: Round, added: list[Applied],
+             fits: list[EffectFit], alpha: float, progress: Progress
+             ) -> tuple[Round, list[Applied], list[EffectFit], Evaluator]:
+    """The last round's contenders (module docstring, step 3), each put in place of the last added effect and
+    the model backfitted; returns the round with the scores of the backfitted models (`Round.backfitted`) and
+    its added effect the best of them, and the model of that one."""
+    assert last.added is not None
+    close = [f for f in last.fits if f is not last.added and not f.screened and f.passes(last.level)
+             and not f.at_edge and f.score - last.added.score <= CONTEND][:CONTENDERS]
+    reference = initial.experiment.reference
+
+    def score(model: Evaluator, chosen: list[Applied]) -> float:
+        D = compare(model.base_metrics, measured, reference, alpha, tests=False).D
+        return D + 2 * sum(len(a.effect.fitted) for a in chosen)
+
+    models = {last.added.effect.name: (score(search, added), added, fits, search)}
+    for f in close:
+        trial_added, trial_fits = [*added[:-1], f.applied], [*fits[:-1], f]
+        model = initial.with_base(trial_added)
+        trial_added, trial_fits, model = _backfit(initial, model, measured, trial_added, trial_fits, alpha, progress)
+        models[f.effect.name] = (score(model, trial_added), trial_added, trial_fits, model)
+    if not close:
+        return last, added, fits, search
+    name = min(models, key=lambda n: models[n][0])
+    _, added, fits, search = models[name]
+    verdict = last.verdict if name == last.added.effect.name else (
+        f"{last.verdict}; backfitted, {name} fits better in its place: {fits[-1].applied.label()}")
+    return (replace(last, added=fits[-1], verdict=verdict, backfitted={n: m[0] for n, m in models.items()}),
+            added, fits, search)
 
 
 def _verdict(best: EffectFit | None, fits: list[EffectFit], level: float) -> str:
