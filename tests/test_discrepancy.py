@@ -177,6 +177,20 @@ def test_search_zooms_on_a_parameter_pinned_finer_than_its_last_step() -> None:
     assert len(fit.points) <= max_evaluations(fit.effect)
 
 
+def test_search_walks_along_a_sharp_lopsided_valley_before_its_parabola() -> None:
+    def valley(batch):  # flat in pitch, sharp and twice as steep above the yaw minimum (1.35 deg) as below
+        p, y = (np.array([a.values[k] for a in batch]) for k in ("pitch_deg", "yaw_deg"))
+        u = y - 1.35
+        d = 150 + 40 * (p - 2.61) ** 2 + 3000 * np.abs(u) ** 1.5 * np.where(u > 0, 2.0, 1.0)
+        return [{"D": np.array([v])} for v in d]
+
+    fit = search_effects([effects.get("camera_pose")], valley, lambda m: m["D"][:, 0], D0=20000.0,
+                         n_conditions=80)[0]
+    # without the walk the parabola extrapolates from one side of the best: yaw 0.014 deg off, D = 155.2
+    assert fit.values["yaw_deg"] == pytest.approx(1.35, abs=0.006) and fit.D < 151.0
+    assert len(fit.points) <= max_evaluations(fit.effect)
+
+
 def test_search_screens_many_effects_and_refines_only_the_best() -> None:
     def bowl(batch):  # only head_roll can reach D = 2; the others stay near 50
         out = []
@@ -401,7 +415,7 @@ def test_two_hidden_effects_are_named_in_order_of_size(hidden_eyes) -> None:
     assert added["pupil_change"]["delta_diameter_mm"] == pytest.approx(-0.7, abs=0.1)
 
 
-def test_the_last_rounds_contenders_are_backfitted_in_its_place_and_the_best_kept(hidden_eyes) -> None:
+def test_the_last_rounds_contenders_are_backfitted_in_its_place_and_the_best_kept_with_its_rivals(hidden_eyes) -> None:
     from eyehil.analysis.discrepancy.workflow import RIVAL_SCORE
 
     hidden = [effects.parse("lens_distortion=-1.9"), effects.parse("pupil_decentre=-0.3,-0.2")]
@@ -413,11 +427,13 @@ def test_the_last_rounds_contenders_are_backfitted_in_its_place_and_the_best_kep
     assert ranked[0] == "cornea_decentre"  # the round, with the first fit's lens distortion, ranks the mimic first
     assert set(last.backfitted) == {"cornea_decentre", "pupil_decentre"}  # feature_noise is not close
     kept = min(last.backfitted, key=last.backfitted.get)
-    assert kept == "pupil_decentre" == last.added.effect.name == result.added[-1].effect.name
+    assert kept == last.added.effect.name == result.added[-1].effect.name
     assert result.final.D + 2 * result.k_total == pytest.approx(last.backfitted[kept])
-    close = last.backfitted["cornea_decentre"] - last.backfitted[kept] <= RIVAL_SCORE
-    assert result.summary()["rivals"]["pupil_decentre"] == (["cornea_decentre"] if close else [])
-    assert "fits better in its place" in last.verdict
+    other = ({"cornea_decentre", "pupil_decentre"} - {kept}).pop()
+    close = last.backfitted[other] - last.backfitted[kept] <= RIVAL_SCORE
+    assert result.summary()["rivals"][kept] == ([other] if close else [])
+    assert ("fits better in its place" in last.verdict) == (kept != ranked[0])
+    assert kept == "pupil_decentre" or close  # the hidden effect is kept or reported as undecidable from the mimic
 
 
 def test_recordings_round_trip_and_a_hidden_effect_is_named_from_them(tmp_path, hidden_eyes) -> None:

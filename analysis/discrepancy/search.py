@@ -12,7 +12,10 @@ call (one batched calibration for every effect's points). Per effect, with P = 1
 2. The `TOP` effects of lowest screened score (D + 2k at the surrogate optimum or the best node) go on
    (`continue_search`): their surrogate optimum is evaluated, then `REFINE` refinements evaluate the
    neighbours of the best point so far at h = step/4, step/8, step/16 (2 or 8 points each, clipped to the
-   range).
+   range). Walk: where the finest refinement or a zoom's (3.) moves the best point (to the edge of its own
+   window), it is repeated at the same h around the new best, up to `WALK` times per search, so that the
+   quadratic below interpolates between points on both sides of the best instead of extrapolating from one side
+   (a sharp, lopsided valley: a camera pose's yaw, whose one-sided parabola overshot by 0.08 deg, D 165 -> 218).
 3. A quadratic D(u) = c + g.u + u.H.u / 2 (u in units of the last h = step/16) fitted by least squares to
    the evaluated points within h of the best (2h or 4h if too few: at a bound); if H is positive definite
    its minimum (kept within that window and the range) is evaluated; the best evaluated point is the
@@ -56,6 +59,7 @@ NODES = {1: 5, 2: 3}
 DENSE = {1: 65, 2: 25}
 REFINE = (2, 3, 4)  # refinement steps h = step / 2**r
 ZOOM, ZOOM_RATIO = 2, 4.0  # zoomed refinements at most, and when (module docstring, 3.)
+WALK = 2  # refinements repeated at the same h at most, while the best moves (module docstring, 2.)
 TOP = 3
 EDGE = 0.01
 
@@ -153,7 +157,8 @@ class EffectSearch:
         self.points, self.Ds = np.empty((0, len(params))), np.empty(0)
         self.stage, self.sigma = 0, np.full(len(params), np.nan)
         self._plan: list[tuple[str, np.ndarray]] = []  # refinements and quadratics still to run, with their h
-        self._h, self.zooms = self.step / 2 ** REFINE[-1], 0
+        self._h, self.zooms, self.walks = self.step / 2 ** REFINE[-1], 0, 0
+        self._walk: tuple[np.ndarray, np.ndarray] | None = None  # the best and h of the refinement in flight
         self.surrogate: tuple[np.ndarray, float] | None = None
         self.node_metrics: list[Metrics] = []
         self._pending: np.ndarray | None = self.coarse
@@ -198,6 +203,12 @@ class EffectSearch:
     def _advance(self) -> None:
         """The next task of the plan (refinements, then the quadratic's minimum), then zooms while they pay."""
         while self._pending is None:
+            if self._walk is not None:
+                centre, h = self._walk
+                self._walk = None
+                if self.walks < WALK and not np.allclose(self.best, centre, rtol=0, atol=1e-12):
+                    self.walks += 1
+                    self._plan.insert(0, ("refine", h))
             if not self._plan:
                 h = self._zoom()
                 if h is None:
@@ -205,6 +216,8 @@ class EffectSearch:
                 self.zooms += 1
                 self._plan = [("refine", h), ("quadratic", h)]
             task, h = self._plan.pop(0)
+            if task == "refine" and np.all(h <= self.step / 2 ** REFINE[-1] * (1 + 1e-9)):  # the finest and zooms
+                self._walk = (self.best.copy(), h)
             self._pending = self._refinement(h) if task == "refine" else self._quadratic(h)
 
     def _zoom(self) -> np.ndarray | None:
@@ -321,9 +334,9 @@ def quadratic_minimum(points, Ds, best, h, lo, hi) -> tuple[np.ndarray | None, n
 
 def max_evaluations(effect: Effect, refined: bool = True) -> int:
     """Evaluations of one effect's search at most: nodes, and if refined the surrogate optimum, the
-    refinements, the quadratic's minimum and the zooms."""
+    refinements and their walks, the quadratic's minimum and the zooms."""
     P = len(effect.fitted)
-    return NODES[P] ** P + (1 + (len(REFINE) + ZOOM) * (3**P - 1) + 1 + ZOOM if refined else 0)
+    return NODES[P] ** P + (1 + (len(REFINE) + ZOOM + WALK) * (3**P - 1) + 1 + ZOOM if refined else 0)
 
 
 def search_effects(effects: Sequence[Effect], evaluate: Callable[[list[Applied]], list[Metrics]],
