@@ -373,6 +373,8 @@ def _contend(initial: Evaluator, search: Evaluator, measured: Measured, last: Ro
     assert last.added is not None
     close = [f for f in last.fits if f is not last.added and not f.screened and f.passes(last.level)
              and not f.at_edge and f.score - last.added.score <= CONTEND][:CONTENDERS]
+    if not close:
+        return last, added, fits, search
     reference = initial.experiment.reference
 
     def score(model: Evaluator, chosen: list[Applied]) -> float:
@@ -385,8 +387,6 @@ def _contend(initial: Evaluator, search: Evaluator, measured: Measured, last: Ro
         model = initial.with_base(trial_added)
         trial_added, trial_fits, model = _backfit(initial, model, measured, trial_added, trial_fits, alpha, progress)
         models[f.effect.name] = (score(model, trial_added), trial_added, trial_fits, model)
-    if not close:
-        return last, added, fits, search
     name = min(models, key=lambda n: models[n][0])
     _, added, fits, search = models[name]
     verdict = last.verdict if name == last.added.effect.name else (
