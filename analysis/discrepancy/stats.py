@@ -20,15 +20,23 @@ The gap measure is D = sum_c (z_m^2 + z_s^2): under "no gap" each term is about 
 change of the model that widens the simulated spread to shrink every t (added noise) pays in z_s what it
 saves in z_m. Conditions share subjects, so the terms are correlated and D is a chi-square only roughly.
 
-**Significance** (`tests=True`, the find and show steps): where both samples are per-subject values,
-p-values come from a Monte Carlo permutation test (`PERMUTATIONS` random relabellings of the pooled
-values, seeded by the condition name; p = (1 + #{|stat*| >= |stat|}) / (B + 1)), of the Welch t for the
-mean and, on the mean-centred values, of ln(s1 / s2) for the spread. Under "no gap" (the two samples from
-one distribution) this is exact up to the Monte Carlo error, whatever the skew of the errors and however
-few the subjects, which the t-distribution is not (four skewed values gave spurious gaps). Otherwise the
-parametric p of the statistic above. All mean and spread p-values of a comparison form one family, Holm
-adjusted (`holm`); a gap is significant when its p_holm < alpha. `tests=False` (every point of a search)
-skips the permutations and keeps the parametric p.
+**Significance** (`tests=True`, the find and show steps): where both samples are per-subject values whose SDs reach
+the resolution (below), p-values come from a Monte Carlo permutation test (`PERMUTATIONS` random relabellings of the
+pooled values, seeded by the condition name; p = (1 + #{|stat*| >= |stat|}) / (B + 1)), of the Welch t for the mean
+and, on the mean-centred values, of ln(s1 / s2) for the spread. Under "no gap" (the two samples from one
+distribution) this is exact up to the Monte Carlo error, whatever the skew of the errors and however few the
+subjects, which the t-distribution is not (four skewed values gave spurious gaps). Otherwise the parametric p of the
+statistic above. All mean and spread p-values of a comparison form one family, Holm adjusted (`holm`); a gap is
+significant when its p_holm < alpha. `tests=False` (every point of a search) skips the permutations and keeps the
+parametric p.
+
+**Resolution** (`SD_FLOOR`, 1e-4 of each quantity's unit): an SD below it is taken as it, in D and in the
+tests. A permutation statistic is scale-free: relabelling the pooled values resolves a difference however far
+below the resolution it lies. Noise-free feature conditions are so precise (the paired contrast of the pupil axis
+ratio between two head positions varies by 1e-5 across eyes) that a permutation test would call a difference of a
+few 1e-5 in the ratio a gap. D does not see such a difference, and no tracker resolves one. So where either
+sample's SD is below the resolution, the condition is tested by the parametric p of its floored statistics
+(`test` "welch (resolution)"), the same statistics D uses.
 
 **Goodness of fit** (`permutation_gof`): the terms of D are correlated (conditions share subjects; the
 same quantity at several head positions), so D is not a chi-square with one degree of freedom per term.
@@ -51,7 +59,9 @@ from scipy import stats as sps
 from eyehil.analysis.discrepancy.data import Measured
 from eyehil.analysis.study.stats import welch_t_test_from_stats
 
-SD_FLOOR_DEG = 1e-4
+#: The resolution of every compared quantity, in its own unit (deg of gaze error, px of a feature, or a ratio):
+#: an SD below it is taken as it, in D and in the tests alike (module docstring, "Resolution").
+SD_FLOOR = 1e-4
 PERMUTATIONS = 4000
 GOF_PERMUTATIONS = 200
 
@@ -205,7 +215,7 @@ def gap_measure(simulated: Mapping[str, np.ndarray], measured: Measured,
         with np.errstate(invalid="ignore", divide="ignore"):
             mean = x.sum(axis=1) / n
             dev = np.where(finite, sim - mean[:, None], 0.0)
-            s_sd = np.maximum(np.sqrt((dev**2).sum(axis=1) / (n - 1)), SD_FLOOR_DEG)
+            s_sd = np.maximum(np.sqrt((dev**2).sum(axis=1) / (n - 1)), SD_FLOOR)
             s_sd = np.where(n >= 2, s_sd, np.nan)
             if cond.values is None and cond.sd is None:
                 df = n - 1.0
@@ -213,7 +223,7 @@ def gap_measure(simulated: Mapping[str, np.ndarray], measured: Measured,
             else:
                 meas = cond.values - measured.conditions[ref].values if paired else cond.values
                 m_mean = float(meas.mean()) if meas is not None else cond.mean
-                m_sd = max(float(meas.std(ddof=1)) if meas is not None else float(cond.sd), SD_FLOOR_DEG)
+                m_sd = max(float(meas.std(ddof=1)) if meas is not None else float(cond.sd), SD_FLOOR)
                 m_n = meas.size if meas is not None else cond.n
                 v1, v2 = s_sd**2 / n, m_sd**2 / m_n
                 t = (mean - m_mean) / np.sqrt(v1 + v2)
@@ -244,7 +254,7 @@ def _gap(name: str, simulated: Mapping[str, np.ndarray], measured: Measured, ref
         raise ValueError(f"condition {name!r}: fewer than 2 simulated eyes with a finite value")
     meas = cond.values - measured.conditions[ref].values if paired else cond.values
     compared = f"{name} - {ref} (paired)" if paired else name
-    s_sd = max(float(sim.std(ddof=1)), SD_FLOOR_DEG)
+    s_sd = max(float(sim.std(ddof=1)), SD_FLOOR)
     if meas is None and cond.sd is None:
         t = (sim.mean() - cond.mean) / (s_sd / np.sqrt(sim.size))
         df = float(sim.size - 1)
@@ -252,16 +262,19 @@ def _gap(name: str, simulated: Mapping[str, np.ndarray], measured: Measured, ref
         return ConditionGap(name, compared, "one-sample t", float(sim.mean()), s_sd, sim.size, cond.mean, None,
                             cond.n, float(t), df, float(p), normal_score(float(t), df))
     m_mean = float(meas.mean()) if meas is not None else cond.mean
-    m_sd = max(float(meas.std(ddof=1)) if meas is not None else float(cond.sd), SD_FLOOR_DEG)
+    m_sd = max(float(meas.std(ddof=1)) if meas is not None else float(cond.sd), SD_FLOOR)
     m_n = meas.size if meas is not None else cond.n
     w = welch_t_test_from_stats(float(sim.mean()), s_sd, sim.size, m_mean, m_sd, m_n)
     g2 = excess_kurtosis(sim, meas) if meas is not None else excess_kurtosis(sim)
     z_spread = float(np.log(s_sd / m_sd) / log_sd_se(sim.size, m_n, g2))
     p_spread = float(2.0 * sps.norm.sf(abs(z_spread)))
     test, p = "welch", float(w.p)
-    if tests and meas is not None:
+    resolved = min(float(sim.std(ddof=1)), float(meas.std(ddof=1)) if meas is not None else np.inf) >= SD_FLOOR
+    if tests and meas is not None and resolved:
         p, p_spread = permutation_p(sim, meas, seed=zlib.crc32(name.encode()))
         test = "permutation"
+    elif meas is not None:
+        test = "welch (resolution)"
     return ConditionGap(name, compared, test, float(sim.mean()), s_sd, sim.size, m_mean, m_sd, m_n, float(w.t),
                         float(w.df), p, normal_score(float(w.t), float(w.df)), z_spread, p_spread)
 
