@@ -513,15 +513,42 @@ def test_blind_trials_score_a_pair_in_the_order_of_each_effect_alone(hidden_eyes
         shrink, added = 0.9, [big, small]
 
     record = {"named_effects": order, "hidden_order": order, "outcome": "explained", "parameters": {},
-              "rivals": {"pupil_change": [], "feature_noise": []}}
+              "rivals": {"pupil_change": [], "feature_noise": []}, "sizes": gaps}
     assert score(record, Result, [small, big]) | {"shrink": 0} == {"shrink": 0, "named_both": True, "in_order": True,
                                                                    "added_nothing": False, "covered": [],
-                                                                   "hidden_among_rivals": [True, True]}
+                                                                   "hidden_among_rivals": [True, True],
+                                                                   "visible": [True, True]}
+    invisible = score({**record, "sizes": {**gaps, NONE: gaps[small.effect.name] - 1.0}}, Result, [small, big])
+    assert invisible["visible"] == [False, True]  # 1 above the floor: below chi-square(1)'s 3.84
     mimic = score({**record, "named_effects": ["cornea_decentre"], "rivals": {"cornea_decentre": ["feature_noise"]}},
                   Result, [small, big])
     assert mimic["hidden_among_rivals"] == [True, False]
     swapped = score({**record, "named_effects": order[::-1]}, Result, [small, big])
     assert swapped["named_both"] and not swapped["in_order"]
+
+
+def test_blind_trial_rates_count_each_kind_against_the_issues_targets() -> None:
+    from eyehil.analysis.discrepancy.trials import met, rates
+
+    def single(named, visible=True, shrink=0.9, covered=(True,)):
+        return {"kind": "single", "named": named, "named_effects": ["x"] if named else [], "visible": [visible],
+                "shrink": shrink, "covered": list(covered), "added_nothing": False, "outcome": "explained"}
+
+    records = [single(True) for _ in range(8)] + [single(False, visible=False), single(True, shrink=0.6),
+                                                    single(False, covered=(False, False))]
+    records += [{"kind": "pair", "named_both": True, "in_order": i < 7, "visible": [True, i != 9], "shrink": 0.8,
+                 "covered": [True], "named_effects": ["a", "b"], "added_nothing": False, "outcome": "explained"}
+                for i in range(10)]
+    records += [{"kind": "negative", "added_nothing": True, "visible": [], "covered": [], "outcome": "no gap"},
+                {"kind": "outside", "added_nothing": False, "visible": [True], "covered": [],
+                 "outcome": "explained"}]
+    counts = rates(records)
+    assert counts["singles_named"] == [9, 11] and counts["singles_named_of_visible"] == [9, 10]
+    assert counts["pairs_in_order"] == [7, 10] and counts["pairs_in_order_of_visible"] == [7, 9]
+    assert counts["shrink_70"] == [18, 19]  # the 9 named singles and the 10 pairs named both
+    assert counts["covered"] == [20, 22]
+    assert met(counts) == {"singles_named": False, "pairs_in_order": True, "negatives_nothing_added": True,
+                           "outside_none_explains": False, "shrink_70": False, "covered": True}
 
 
 def test_blignaut_conditions_include_the_features_of_recordings(hidden_eyes) -> None:

@@ -18,8 +18,9 @@ Scores per trial (`score`): named (the hidden effect is the first named, outcome
 in order (pairs: both named; and in the order of their sizes), nothing added (negatives), "none explains"
 (outside), shrink (1 - D_after / D_before, show eyes), whether each hidden effect was added or fitted as well as
 an added one (`hidden_among_rivals`: the data could not tell it from the one named), and whether each hidden
-parameter lies within the fit's 95 % interval (1.96 sigma). Results go to DIR/trials.json, one record per trial,
-and a summary.
+parameter lies within the fit's 95 % interval (1.96 sigma); and whether each hidden effect is `visible`, opening
+a gap of its own that some method could name. Records go to DIR/trials-EXPERIMENT-KIND[-TAGS].jsonl, one line per
+trial (appended), and the run ends with its `rates` against the issue's `TARGETS`. `--jobs N` runs N trials at once.
 """
 
 from __future__ import annotations
@@ -97,10 +98,9 @@ def trial(kind: str, index: int, *, experiment: str, search_eyes: int, show_eyes
     measured = hidden_measured(hidden, eyes=eyes, experiment=experiment, conditions=conditions,
                                seed=seed + 3 + index)
     show = model_eyes(model, max(show_eyes, search_eyes), seed)
-    gaps = sizes(hidden, eyes, experiment, conditions, seed + 3 + index, show[:search_eyes], seed) \
-        if len(hidden) == 2 else {}
+    gaps = sizes(hidden, eyes, experiment, conditions, seed + 3 + index, show[:search_eyes], seed) if hidden else {}
     named = [a.effect.name for a in hidden]
-    order = sorted(named, key=lambda name: -gaps[name]) if gaps else named
+    order = sorted(named, key=lambda name: -gaps[name])
     start = time.perf_counter()
     result = run_discrepancy(measured, eyes=show[:show_eyes], search_eyes=show[:search_eyes],
                              effect_names=allowed, rounds=2, seed=seed)
@@ -129,11 +129,19 @@ def sizes(hidden, eyes, experiment: str, conditions, noise_seed: int, search_eye
     return {**{a.effect.name: gap([a]) for a in hidden}, NONE: gap([])}
 
 
+def visible(gaps: dict[str, float], applied) -> bool:
+    """Whether a hidden effect opens a gap of its own: its D alone exceeds the floor of no effect (`sizes`) by more
+    than the 95 % point of chi-square(k), k its fitted parameters. No method can name an effect that does not."""
+    from scipy.stats import chi2
+
+    return bool(gaps[applied.effect.name] - gaps[NONE] > chi2.ppf(0.95, len(applied.effect.fitted)))
+
+
 def score(record: dict, result, hidden) -> dict:
     """The trial's scores (module docstring)."""
     named = record["named_effects"]
     truth = [a.effect.name for a in hidden]
-    out: dict = {"shrink": result.shrink}
+    out: dict = {"shrink": result.shrink, "visible": [visible(record["sizes"], a) for a in hidden]}
     if len(hidden) == 2:
         out["named_both"] = sorted(named) == sorted(truth)
         out["in_order"] = named == record["hidden_order"]
@@ -154,12 +162,62 @@ def score(record: dict, result, hidden) -> dict:
     return out
 
 
+#: The issue's targets for `rates` (fractions of trials; issue 18): singles named, pairs named in order, nothing
+#: added on negatives, "none explains" for an effect outside the catalogue, shrink >= 70 % where the hidden effects
+#: were named, hidden parameters within the fit's 95 % interval.
+TARGETS = {"singles_named": 0.9, "pairs_in_order": 0.7, "negatives_nothing_added": 1.0,
+           "outside_none_explains": 1.0, "shrink_70": 1.0, "covered": 0.8}
+
+
+def rates(records: list[dict]) -> dict[str, list[int]]:
+    """[hits, trials] of every rate of `TARGETS` over trial records, and of naming among the trials whose hidden
+    effects are all `visible` ("..._of_visible"); a rate without trials is [0, 0]."""
+    def kind(name: str) -> list[dict]:
+        return [r for r in records if r["kind"] == name]
+
+    def count(hits) -> list[int]:
+        hits = [bool(h) for h in hits]
+        return [sum(hits), len(hits)]
+
+    singles, pairs = kind("single"), kind("pair")
+    named = [r for r in singles if r.get("named")] + [r for r in pairs if r.get("named_both")]
+    return {"singles_named": count(r["named"] for r in singles),
+            "singles_named_of_visible": count(r["named"] for r in singles if all(r.get("visible", [True]))),
+            "pairs_in_order": count(r["in_order"] for r in pairs),
+            "pairs_in_order_of_visible": count(r["in_order"] for r in pairs if all(r.get("visible", [True]))),
+            "negatives_nothing_added": count(r["added_nothing"] for r in kind("negative")),
+            "outside_none_explains": count(r["outcome"] == "none explains" for r in kind("outside")),
+            "shrink_70": count(r["shrink"] >= 0.7 for r in named),
+            "covered": count(c for r in singles + pairs for c in r["covered"])}
+
+
+def met(counts: dict[str, list[int]]) -> dict[str, bool]:
+    """Each rate of `TARGETS` that has trials: whether it reaches its target."""
+    return {k: counts[k][0] >= target * counts[k][1] for k, target in TARGETS.items() if counts[k][1]}
+
+
+def run_trials(kind: str, indices, *, jobs: int = 1, **settings):
+    """`trial(kind, i, **settings)` for every i of `indices`, in `jobs` processes; yields the records as they end."""
+    from eyehil.parallel import worker_pool
+
+    if jobs < 2:
+        for i in indices:
+            yield trial(kind, i, **settings)
+        return
+    from concurrent.futures import as_completed
+
+    with worker_pool(jobs) as pool:
+        for future in as_completed([pool.submit(trial, kind, i, **settings) for i in indices]):
+            yield future.result()
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="discrepancy-trials")
     parser.add_argument("--kind", default="single", choices=("single", "pair", "negative", "outside"))
     parser.add_argument("--trials", type=int, default=10)
     parser.add_argument("--first", type=int, default=0, help="index of the first trial")
+    parser.add_argument("--jobs", type=int, default=1, help="trials run at once, each in its own process")
     parser.add_argument("--experiment", default="guestrin2006")
     parser.add_argument("--search-eyes", type=int, default=8)
     parser.add_argument("--show-eyes", type=int, default=20)
@@ -170,18 +228,28 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--model-eyes", default="published", choices=MODEL_EYES,
                         help="the workflow's model eyes: the published eyes (default) or a Rozema draw of their own")
     args = parser.parse_args(argv)
+    if args.trials < 1 or args.first < 0 or args.jobs < 1:
+        parser.error("--trials and --jobs must be at least 1, --first at least 0")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     tags = ("-features" if args.features else "") + ("" if args.model_eyes == "published" else f"-{args.model_eyes}")
     path = out / f"trials-{args.experiment}-{args.kind}{tags}.jsonl"
-    for i in range(args.first, args.first + args.trials):
-        rec = trial(args.kind, i, experiment=args.experiment, search_eyes=args.search_eyes, show_eyes=args.show_eyes,
-                    hidden_eyes=args.hidden_eyes, seed=args.seed, features=args.features, model=args.model_eyes)
+    settings = {"experiment": args.experiment, "search_eyes": args.search_eyes, "show_eyes": args.show_eyes,
+                "hidden_eyes": args.hidden_eyes, "seed": args.seed, "features": args.features,
+                "model": args.model_eyes}
+    records = []
+    for rec in run_trials(args.kind, range(args.first, args.first + args.trials), jobs=args.jobs, **settings):
+        records.append(rec)
         with path.open("a", encoding="utf-8") as f:
             f.write(json.dumps(rec, default=float) + "\n")
         print(json.dumps({k: rec[k] for k in ("kind", "index", "hidden", "outcome", "named_effects", "hidden_order",
-                                               "in_order", "shrink", "covered", "seconds") if k in rec},
+                                               "in_order", "shrink", "covered", "visible", "seconds") if k in rec},
                          default=float), flush=True)
+    counts = rates(records)
+    verdict = met(counts)
+    print("rates of this run: " + "; ".join(f"{k} {h} of {n}" + (f" ({'met' if verdict[k] else 'NOT met'})"
+                                                                   if k in verdict else "")
+                                             for k, (h, n) in counts.items() if n), flush=True)
     return 0
 
 
