@@ -135,8 +135,9 @@ def render_markdown(result: DiscrepancyResult, png: str) -> str:
              "(each a simulation and a calibration of the search eyes).", "",
              "D = sum over conditions of the squared normal scores of the mean and the spread tests "
              "(analysis/discrepancy/stats.py). The top-ranked effect is added when it lowers D, divided by the "
-             "misfit scale s^2 = max(1, D / (n - k)), by more than the 95 % point of chi-square(k) for its k fitted "
-             "parameters and no parameter is at the edge of its plausible range. The outcome is 'explained' only if "
+             "misfit scale s^2 = max(1, D / (n - k)), by more than the point of chi-square(k) for its k fitted "
+             "parameters at the round's level (Bonferroni over its candidates: 1 - 0.05 / m) and no parameter is at "
+             "the edge of its plausible range. The outcome is 'explained' only if "
              f"no significant gap is left and P(chi-square) of the final D >= {s.get('alpha_gof', 0.01)} "
              "(docs/discrepancy.md).", "",
              "## Rounds", ""]

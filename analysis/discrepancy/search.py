@@ -33,15 +33,15 @@ An effect that is screened out keeps its best node (or the surrogate optimum's D
 no uncertainty; it ranks below every refined effect of equal score only by its (higher) D.
 
 Ranking (`EffectFit.score`): D at the estimate plus 2 per fitted parameter (AIC-like, D read as -2 log
-likelihood up to a constant). An effect is worth adding only if it lowers D by more than the 95 % point of
-chi-square(k) (`EffectFit.passes`), after dividing by the squared scale factor s^2 = max(1, D / (n - k))
-(n terms of D): when the model with the effect still misfits far beyond sampling, D's scale is inflated
-and so is every drop of D (the scale factor of least squares with an unknown variance; the Particle Data
-Group's practice); and only if no fitted parameter ends within `EDGE` (a fraction of its range) of a
-bound of its plausible range (`EffectFit.at_edge`): a fit that wants to leave the plausible range is
-evidence against the effect, not a measurement of it. The reported 1-sigma uncertainties are multiplied
-by s; `EffectFit.ci95` is 1.96 of them. `EffectFit.gof_p` is the goodness of fit of the model with the
-effect: P(chi-square(n - k) >= D).
+likelihood up to a constant). An effect is worth adding only if it lowers D by more than the point of
+chi-square(k) at the given level (`EffectFit.passes`; the workflow's is Bonferroni over a round's candidates),
+after dividing by the squared scale factor s^2 = max(1, D / (n - k)) (n terms of D): when the model with the
+effect still misfits far beyond sampling, D's scale is inflated and so is every drop of D (the scale factor of
+least squares with an unknown variance; the Particle Data Group's practice); and only if no fitted parameter
+ends within `EDGE` (a fraction of its range) of a bound of its plausible range (`EffectFit.at_edge`): a fit
+that wants to leave the plausible range is evidence against the effect, not a measurement of it. The reported
+1-sigma uncertainties are multiplied by s; `EffectFit.ci95` is 1.96 of them. `EffectFit.gof_p` is the goodness
+of fit of the model with the effect: P(chi-square(n - k) >= D).
 """
 
 from __future__ import annotations
