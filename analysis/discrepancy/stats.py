@@ -270,11 +270,11 @@ def _gap(name: str, simulated: Mapping[str, np.ndarray], measured: Measured, ref
     p_spread = float(2.0 * sps.norm.sf(abs(z_spread)))
     test, p = "welch", float(w.p)
     resolved = min(float(sim.std(ddof=1)), float(meas.std(ddof=1)) if meas is not None else np.inf) >= SD_FLOOR
-    if tests and meas is not None and resolved:
+    if meas is not None and not resolved:
+        test = "welch (resolution)"
+    elif tests and meas is not None:
         p, p_spread = permutation_p(sim, meas, seed=zlib.crc32(name.encode()))
         test = "permutation"
-    elif meas is not None:
-        test = "welch (resolution)"
     return ConditionGap(name, compared, test, float(sim.mean()), s_sd, sim.size, m_mean, m_sd, m_n, float(w.t),
                         float(w.df), p, normal_score(float(w.t), float(w.df)), z_spread, p_spread)
 
