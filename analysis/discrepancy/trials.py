@@ -193,7 +193,7 @@ def rates(records: list[dict]) -> dict[str, list[int]]:
 
 def met(counts: dict[str, list[int]]) -> dict[str, bool]:
     """Each rate of `TARGETS` that has trials: whether it reaches its target."""
-    return {k: counts[k][0] >= target * counts[k][1] for k, target in TARGETS.items() if counts[k][1]}
+    return {k: counts[k][0] >= target * counts[k][1] - 1e-9 for k, target in TARGETS.items() if counts[k][1]}
 
 
 def run_trials(kind: str, indices, *, jobs: int = 1, **settings):
