@@ -4,9 +4,9 @@ Every evaluation is a simulation and a calibration, so the search is small and b
 runs one `EffectSearch` per effect in lock-step and hands all their points of a stage to one `evaluate`
 call (one batched calibration for every effect's points). Per effect, with P = 1 or 2 fitted parameters:
 
-1. Screen: `NODES[P]` evaluated nodes over the plausible range [low, high] (5, or 3 x 3). Every per-eye
+1. Screen: `NODES[P]` evaluated nodes over the plausible range [low, high] (5, or 5 x 5). Every per-eye
    condition value is interpolated between the nodes (a cubic spline through 5 nodes; a tensor-product
-   quadratic through 3 x 3), and D of the interpolated conditions is minimised on a dense grid (`DENSE[P]`
+   Lagrange quartic through 5 x 5), and D of the interpolated conditions is minimised on a dense grid (`DENSE[P]`
    points per parameter): the surrogate optimum, without further simulations (the conditions are smooth
    in the parameters: averages over fixations of smooth functions of the features).
 2. The `TOP` effects of lowest screened score (D + 2k at the surrogate optimum or the best node) go on
@@ -55,7 +55,7 @@ from scipy import stats as sps
 
 from eyehil.emulator.effects import Applied, Effect
 
-NODES = {1: 5, 2: 3}
+NODES = {1: 5, 2: 5}  # 5 x 5 for two parameters: a 3 x 3 screen started a screen tilt in a second basin
 DENSE = {1: 65, 2: 25}
 REFINE = (2, 3, 4)  # refinement steps h = step / 2**r
 ZOOM, ZOOM_RATIO = 2, 4.0  # zoomed refinements at most, and when (module docstring, 3.)
