@@ -275,7 +275,7 @@ def surrogate_minimum(axes: list[np.ndarray], metrics: list[Metrics], score: Sco
         points = grid[:, None]
     else:
         u = [np.linspace(a[0], a[-1], dense) for a in axes]
-        weights = [_lagrange(a, g) for a, g in zip(axes, u, strict=True)]  # (dense, 3) each
+        weights = [_lagrange(a, g) for a, g in zip(axes, u, strict=True)]  # (dense, nodes) each
         w = np.einsum("ai,bj->abij", *weights).reshape(dense * dense, -1)  # node order of itertools.product
         inter = {k: w @ _filled(v) for k, v in values.items()}
         points = np.array(list(itertools.product(*u)))

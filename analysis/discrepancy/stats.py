@@ -254,7 +254,8 @@ def _gap(name: str, simulated: Mapping[str, np.ndarray], measured: Measured, ref
         raise ValueError(f"condition {name!r}: fewer than 2 simulated eyes with a finite value")
     meas = cond.values - measured.conditions[ref].values if paired else cond.values
     compared = f"{name} - {ref} (paired)" if paired else name
-    s_sd = max(float(sim.std(ddof=1)), SD_FLOOR)
+    raw_sd = float(sim.std(ddof=1))
+    s_sd = max(raw_sd, SD_FLOOR)
     if meas is None and cond.sd is None:
         t = (sim.mean() - cond.mean) / (s_sd / np.sqrt(sim.size))
         df = float(sim.size - 1)
@@ -262,15 +263,15 @@ def _gap(name: str, simulated: Mapping[str, np.ndarray], measured: Measured, ref
         return ConditionGap(name, compared, "one-sample t", float(sim.mean()), s_sd, sim.size, cond.mean, None,
                             cond.n, float(t), df, float(p), normal_score(float(t), df))
     m_mean = float(meas.mean()) if meas is not None else cond.mean
-    m_sd = max(float(meas.std(ddof=1)) if meas is not None else float(cond.sd), SD_FLOOR)
+    m_raw_sd = float(meas.std(ddof=1)) if meas is not None else float(cond.sd)
+    m_sd = max(m_raw_sd, SD_FLOOR)
     m_n = meas.size if meas is not None else cond.n
     w = welch_t_test_from_stats(float(sim.mean()), s_sd, sim.size, m_mean, m_sd, m_n)
     g2 = excess_kurtosis(sim, meas) if meas is not None else excess_kurtosis(sim)
     z_spread = float(np.log(s_sd / m_sd) / log_sd_se(sim.size, m_n, g2))
     p_spread = float(2.0 * sps.norm.sf(abs(z_spread)))
     test, p = "welch", float(w.p)
-    resolved = min(float(sim.std(ddof=1)), float(meas.std(ddof=1)) if meas is not None else np.inf) >= SD_FLOOR
-    if meas is not None and not resolved:
+    if meas is not None and min(raw_sd, m_raw_sd) < SD_FLOOR:  # below the resolution (module docstring)
         test = "welch (resolution)"
     elif tests and meas is not None:
         p, p_spread = permutation_p(sim, meas, seed=zlib.crc32(name.encode()))

@@ -372,7 +372,7 @@ def _contend(initial: Evaluator, search: Evaluator, measured: Measured, last: Ro
     its added effect the best of them, and the model of that one."""
     assert last.added is not None
     close = [f for f in last.fits if f is not last.added and not f.screened and f.passes(last.level)
-             and not f.at_edge and f.score - last.added.score <= CONTEND][:CONTENDERS]
+             and f.score - last.added.score <= CONTEND][:CONTENDERS]  # passes: lowers D, not at an edge
     if not close:
         return last, added, fits, search
     reference = initial.experiment.reference
