@@ -18,17 +18,19 @@ Known answers (hex): ``00`` -> ``01 01``; ``00 00`` -> ``01 01 01``; ``11 22 00 
 ``FF 01..FE``; 255 bytes ``01..FF`` -> ``FF 01..FE 02 FF``. The frame delimiter 0x00 is not part of
 these strings: `eyehil.protocols.framing` adds it.
 
-`encode` and `decode` are the fast paths: a few Python operations per piece between two zeros, while a run of
-full blocks (camera images have long zero-free runs) is cut by one struct call and decoded by one strided
+`encode` and `decode` run the compiled kernels (`eyehil.protocols.kernels`) where they can be had, else the Python
+fast paths `encode_python` and `decode_python`: a few Python operations per piece between two zeros, while a run
+of full blocks (camera images have long zero-free runs) is cut by one struct call and decoded by one strided
 deletion. `encode_reference` and `decode_reference` are the block-at-a-time forms that follow the definition
-above, kept as the reference the fast paths are tested against. `decode` hands any string containing a 0x00
-to `decode_reference`, so that every invalid string raises the same `CobsDecodeError`, with the same message.
+above, kept as the reference the others are tested against. Every invalid string goes to `decode_reference`, so
+that it raises the same `CobsDecodeError`, with the same message, whichever path found it invalid.
 """
 
 from __future__ import annotations
 
 import struct
 
+from eyehil.protocols import kernels
 from eyehil.protocols.errors import CobsDecodeError
 
 MAX_BLOCK = 254  # data bytes in one block of code 0xFF
@@ -45,7 +47,23 @@ def max_encoded_size(n: int) -> int:
 
 
 def encode(data: bytes | bytearray | memoryview) -> bytes:
-    """COBS-encode `data`; the result contains no 0x00 byte. Same bytes as `encode_reference`, faster.
+    """COBS-encode `data`; the result contains no 0x00 byte. Same bytes as `encode_reference`, faster."""
+    return kernels.cobs_encode(data) if kernels.AVAILABLE else encode_python(data)
+
+
+def decode(encoded: bytes | bytearray | memoryview) -> bytes:
+    """Decode one COBS string (without its delimiter); raise `CobsDecodeError` if it is not valid COBS.
+
+    Same result, and the same error, as `decode_reference`, faster.
+    """
+    if not kernels.AVAILABLE:
+        return decode_python(encoded)
+    out = kernels.cobs_decode(encoded)
+    return decode_reference(encoded) if out is None else out  # invalid: the reference finds the first fault
+
+
+def encode_python(data: bytes | bytearray | memoryview) -> bytes:
+    """`encode` without the compiled kernel.
 
     The output is `data` behind one code byte, with each 0x00 replaced by the code byte of the piece after it, as long
     as no zero-free piece reaches 254 bytes: those codes are patched in place. A longer piece is cut into 0xFF
@@ -89,11 +107,8 @@ def _splice_full_blocks(
     return end + 1
 
 
-def decode(encoded: bytes | bytearray | memoryview) -> bytes:
-    """Decode one COBS string (without its delimiter); raise `CobsDecodeError` if it is not valid COBS.
-
-    Same result, and the same error, as `decode_reference`, faster.
-    """
+def decode_python(encoded: bytes | bytearray | memoryview) -> bytes:
+    """`decode` without the compiled kernel."""
     src = bytes(encoded)
     if not src or 0 in src:
         return decode_reference(src)  # invalid: the reference finds the first fault and names it

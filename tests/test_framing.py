@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from eyehil.protocols import cobs
+from eyehil.protocols import cobs, kernels
 from eyehil.protocols.crc import CRC16_CHECK, crc16, crc16_bitwise
 from eyehil.protocols.errors import CobsDecodeError, FramingError
 from eyehil.protocols.framing import (
@@ -104,16 +104,41 @@ def _decoded_or_error(decode, encoded: bytes) -> bytes | str:
         return f"error: {exc}"
 
 
-def test_cobs_fast_paths_give_the_references_bytes() -> None:
+def _compiled_decode(encoded: bytes) -> bytes:
+    """The kernel alone, with `cobs.decode`'s contract: invalid strings raise the reference's error."""
+    out = kernels.cobs_decode(encoded)
+    return cobs.decode_reference(encoded) if out is None else out
+
+
+NO_KERNELS = pytest.mark.skipif(not kernels.AVAILABLE, reason=f"compiled kernels unavailable: {kernels.REASON}")
+#: (encode, decode) of each fast path: what `cobs.encode`/`decode` run (the kernels where built), the Python fast
+#: paths, and the compiled kernels themselves.
+FAST_PATHS = [pytest.param(cobs.encode, cobs.decode, id="public"),
+              pytest.param(cobs.encode_python, cobs.decode_python, id="python"),
+              pytest.param(lambda d: kernels.cobs_encode(d), _compiled_decode, id="compiled", marks=NO_KERNELS)]
+
+
+def test_the_compiled_kernels_are_in_use_where_a_compiler_is() -> None:
+    import shutil
+
+    if shutil.which("cc") is None:
+        pytest.skip("no C compiler here")
+    assert kernels.AVAILABLE or "EYEHIL_PURE_PYTHON" in kernels.REASON, kernels.REASON
+
+
+@pytest.mark.parametrize(("encode", "decode"), FAST_PATHS)
+def test_cobs_fast_paths_give_the_references_bytes(encode, decode) -> None:
     for data in _cobs_edge_cases() + _random_cobs_data(np.random.default_rng(5), 1500):
         encoded = cobs.encode_reference(data)
-        assert cobs.encode(data) == encoded
-        assert cobs.encode(bytearray(data)) == cobs.encode(memoryview(data)) == encoded
-        assert cobs.decode(encoded) == cobs.decode_reference(encoded) == data
-        assert type(cobs.encode(data)) is bytes and type(cobs.decode(encoded)) is bytes
+        assert encode(data) == encoded
+        assert encode(bytearray(data)) == encode(memoryview(data)) == encoded
+        assert decode(encoded) == cobs.decode_reference(encoded) == data
+        assert decode(bytearray(encoded)) == data
+        assert type(encode(data)) is bytes and type(decode(encoded)) is bytes
 
 
-def test_cobs_decoder_refuses_what_the_reference_refuses_with_the_same_message() -> None:
+@pytest.mark.parametrize(("encode", "decode"), FAST_PATHS)
+def test_cobs_decoder_refuses_what_the_reference_refuses_with_the_same_message(encode, decode) -> None:
     rng = np.random.default_rng(6)
     bad = 0
     for data in _cobs_edge_cases() + _random_cobs_data(rng, 600):
@@ -125,22 +150,34 @@ def test_cobs_decoder_refuses_what_the_reference_refuses_with_the_same_message()
             if rng.random() < 0.5:
                 del mutated[int(rng.integers(1, len(mutated) + 1)) :]
             expected = _decoded_or_error(cobs.decode_reference, bytes(mutated))
-            assert _decoded_or_error(cobs.decode, bytes(mutated)) == expected
+            assert _decoded_or_error(decode, bytes(mutated)) == expected
             bad += isinstance(expected, str)
     for count in (1, 2, 63, 64, 65, 130):  # runs of 0xFF blocks, the last one truncated by 1 or 254 bytes
         for short in (1, 254):
             src = ((b"\xff" + bytes(range(1, 255))) * count)[:-short]
-            assert _decoded_or_error(cobs.decode, src) == _decoded_or_error(cobs.decode_reference, src)
+            assert _decoded_or_error(decode, src) == _decoded_or_error(cobs.decode_reference, src)
     assert bad > 500  # the mutations did reach the error paths
 
 
+@pytest.mark.parametrize(("encode", "decode"), FAST_PATHS)
 @settings(max_examples=300, deadline=None)
 @given(data=st.binary(max_size=2000))
-def test_cobs_fast_paths_match_the_reference_property(data: bytes) -> None:
-    encoded = cobs.encode(data)
+def test_cobs_fast_paths_match_the_reference_property(encode, decode, data: bytes) -> None:
+    encoded = encode(data)
     assert encoded == cobs.encode_reference(data)
-    assert cobs.decode(encoded) == data
-    assert _decoded_or_error(cobs.decode, data) == _decoded_or_error(cobs.decode_reference, data)
+    assert decode(encoded) == data
+    assert _decoded_or_error(decode, data) == _decoded_or_error(cobs.decode_reference, data)
+
+
+@pytest.mark.parametrize(("encode", "decode"), FAST_PATHS)
+@settings(max_examples=200, deadline=None)
+@given(data=st.lists(st.sampled_from([b"\x00", b"\x01", bytes(range(1, 254)), bytes(range(1, 255)),
+                                      bytes(range(1, 256))]), max_size=12).map(b"".join))
+def test_cobs_fast_paths_at_the_block_boundaries_property(encode, decode, data: bytes) -> None:
+    """Runs of 253, 254 and 255 non-zero bytes between zeros: where a 0xFF block starts, ends or is followed by none."""
+    encoded = encode(data)
+    assert encoded == cobs.encode_reference(data)
+    assert decode(encoded) == data
 
 
 @pytest.mark.parametrize("bad", ["", "00", "05 11 22", "03 11 00", "02 11 00 01"])
@@ -162,6 +199,16 @@ def test_crc_fast_path_matches_reference_and_binascii() -> None:
         data = rng.integers(0, 256, n, dtype=np.uint8).tobytes()
         assert crc16(data) == crc16_bitwise(data) == binascii.crc_hqx(data, 0xFFFF)
         assert crc16(data[n // 2 :], crc16(data[: n // 2])) == crc16(data)
+
+
+@NO_KERNELS
+@settings(max_examples=300, deadline=None)
+@given(data=st.binary(max_size=300), value=st.integers(0, 0xFFFF), cut=st.integers(0, 300))
+def test_crc_kernel_matches_binascii_property(data: bytes, value: int, cut: int) -> None:
+    """Every length (the 8-byte slices and the bytes after them) and any starting register."""
+    assert kernels.crc16(data, value) == binascii.crc_hqx(data, value)
+    assert kernels.crc16(bytearray(data), value) == kernels.crc16(memoryview(data), value) == crc16(data, value)
+    assert kernels.crc16(data[cut:], kernels.crc16(data[:cut], value)) == binascii.crc_hqx(data, value)
 
 
 def test_encode_frame_adds_one_delimiter_and_refuses_oversized() -> None:

@@ -7,8 +7,9 @@ module), not on its parent packages' ``__init__``.
 
 The one-way rule: protocols imports no other layer; drivers imports protocols; emulator imports protocols and,
 of the host side, only the pure estimators in drivers/gaze; analysis may import all three. `eyehil.parallel`
-(chunks of work on a process pool or Dask) and `eyehil.stopping` (a command's wait for SIGTERM) lie below every
-layer: they import no eyehil module, and the layers may use them.
+(chunks of work on a process pool or Dask), `eyehil.stopping` (a command's wait for SIGTERM) and `eyehil.cbuild`
+(a C helper built on first use) lie below every layer: they import no eyehil module, and the layers may use
+them.
 """
 
 from __future__ import annotations
@@ -21,13 +22,14 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 LAYERS = ("emulator", "drivers", "protocols", "analysis")
 ALLOWED: dict[str, tuple[str, ...]] = {
-    "protocols": ("eyehil.protocols",),
+    "protocols": ("eyehil.protocols", "eyehil.cbuild"),
     "drivers": ("eyehil.drivers", "eyehil.protocols", "eyehil.stopping"),
-    "emulator": ("eyehil.emulator", "eyehil.protocols", "eyehil.drivers.gaze", "eyehil.parallel", "eyehil.stopping"),
+    "emulator": ("eyehil.emulator", "eyehil.protocols", "eyehil.drivers.gaze", "eyehil.parallel", "eyehil.stopping",
+                 "eyehil.cbuild"),
     "analysis": ("eyehil.analysis", "eyehil.emulator", "eyehil.drivers", "eyehil.protocols", "eyehil.parallel",
-                 "eyehil.stopping"),
+                 "eyehil.stopping", "eyehil.cbuild"),
 }
-LEAVES = ("eyehil.parallel", "eyehil.stopping")  # shared below the layers: they import no eyehil module
+LEAVES = ("eyehil.parallel", "eyehil.stopping", "eyehil.cbuild")  # below the layers: they import no eyehil module
 
 
 def _modules() -> dict[str, Path]:

@@ -1,0 +1,91 @@
+/*
+ * kernels.c - the native protocol's framing kernels, compiled on first use (protocols/kernels.py):
+ * CRC-16/CCITT-FALSE sliced by 8 bytes, and COBS encoding and decoding a run at a time.
+ *
+ * They compute exactly what protocols/crc.py and protocols/cobs.py define (tests/test_framing.py compares them
+ * with the Python references); no state, no allocation: the caller passes the output buffer.
+ */
+#include <stddef.h>
+#include <stdint.h>
+#include <string.h>
+
+#define COBS_MAX_BLOCK 254
+
+/* table[k][b]: the CRC register after byte b and then k zero bytes, from a zero register. */
+static uint16_t table[8][256];
+
+__attribute__((constructor)) static void make_table(void)  /* when the library is loaded, before any call */
+{
+    for (int b = 0; b < 256; b++) {
+        uint16_t crc = (uint16_t)(b << 8);
+        for (int bit = 0; bit < 8; bit++)
+            crc = (crc & 0x8000u) ? (uint16_t)((crc << 1) ^ 0x1021u) : (uint16_t)(crc << 1);
+        table[0][b] = crc;
+    }
+    for (int k = 1; k < 8; k++)
+        for (int b = 0; b < 256; b++) {
+            uint16_t prev = table[k - 1][b];
+            table[k][b] = (uint16_t)((prev << 8) ^ table[0][prev >> 8]);
+        }
+}
+
+/* The CRC register after `data`, from `crc`. The register enters as the first two message bytes (the CRC is
+ * linear and MSB first), then each of 8 bytes contributes its own table entry. */
+uint16_t eyehil_crc16(const uint8_t *data, size_t len, uint16_t crc)
+{
+    while (len >= 8) {
+        crc = (uint16_t)(table[7][data[0] ^ (crc >> 8)] ^ table[6][data[1] ^ (crc & 0xFFu)]
+                         ^ table[5][data[2]] ^ table[4][data[3]] ^ table[3][data[4]]
+                         ^ table[2][data[5]] ^ table[1][data[6]] ^ table[0][data[7]]);
+        data += 8;
+        len -= 8;
+    }
+    while (len--)
+        crc = (uint16_t)((crc << 8) ^ table[0][(crc >> 8) ^ *data++]);
+    return crc;
+}
+
+/* COBS-encode src[0..n) into dst (room for n + n / 254 + 1 bytes); returns the encoded length. Blocks end at a
+ * zero or after 254 data bytes; no empty block follows a final run of whole 254-byte blocks. */
+size_t eyehil_cobs_encode(const uint8_t *src, size_t n, uint8_t *dst)
+{
+    const uint8_t *p = src, *end = src + n;
+    uint8_t *out = dst;
+    for (;;) {
+        size_t left = (size_t)(end - p);
+        size_t limit = left < COBS_MAX_BLOCK ? left : COBS_MAX_BLOCK;
+        const uint8_t *zero = memchr(p, 0, limit);
+        size_t run = zero ? (size_t)(zero - p) : limit;
+        *out = (uint8_t)(zero || run < COBS_MAX_BLOCK ? run + 1 : 0xFF);
+        memcpy(out + 1, p, run);
+        out += run + 1;
+        if (zero) {
+            p = zero + 1;
+        } else {
+            p += run;
+            if (run < COBS_MAX_BLOCK || p == end)
+                break;
+        }
+    }
+    return (size_t)(out - dst);
+}
+
+/* Decode one COBS string src[0..n) (no delimiter) into dst (room for n bytes); returns the decoded length, or -1
+ * if the string is not valid COBS (empty, a zero byte, a block cut short). */
+long eyehil_cobs_decode(const uint8_t *src, size_t n, uint8_t *dst)
+{
+    size_t i = 0, out = 0;
+    if (n == 0)
+        return -1;
+    while (i < n) {
+        size_t code = src[i];
+        if (code == 0 || i + code > n || memchr(src + i + 1, 0, code - 1))
+            return -1;
+        memcpy(dst + out, src + i + 1, code - 1);
+        out += code - 1;
+        i += code;
+        if (code != 0xFF && i < n)
+            dst[out++] = 0;
+    }
+    return (long)out;
+}
