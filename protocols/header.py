@@ -14,7 +14,8 @@ A frame (before COBS) is, little-endian throughout::
 
 The header layout and the CRC trailer are frozen for every protocol version, so that a receiver can
 always check the CRC, read version, type and seq of a frame it cannot parse, and refuse it by number.
-`unpack_frame` checks, in order: size, CRC, magic, version, payload length.
+`unpack_frame` checks, in order: size, CRC, magic, version, payload length. `pack_frame` builds a frame;
+`wire_frame` builds its wire bytes (COBS and delimiter, `eyehil.protocols.framing`) in the same step.
 """
 
 from __future__ import annotations
@@ -23,9 +24,10 @@ import struct
 from dataclasses import dataclass
 from enum import IntEnum
 
+from eyehil.protocols import kernels
 from eyehil.protocols.crc import CRC_SIZE, crc16
 from eyehil.protocols.errors import BadLengthError, BadMagicError, CrcError, FramingError, UnsupportedVersionError
-from eyehil.protocols.framing import MAX_FRAME_SIZE
+from eyehil.protocols.framing import MAX_FRAME_SIZE, encode_frame
 
 MAGIC = 0x4845
 PROTOCOL_VERSION = 1
@@ -75,14 +77,28 @@ class Header:
 
 def pack_frame(msg_type: int, seq: int, timestamp_us: int, payload: bytes, version: int = PROTOCOL_VERSION) -> bytes:
     """Header + payload + CRC (not yet COBS-encoded); `seq` is taken modulo 2**32."""
+    head = _pack_header(msg_type, seq, timestamp_us, payload, version)
+    payload = bytes(payload)
+    return b"".join((head, payload, _CRC.pack(crc16(payload, crc16(head)))))
+
+
+def wire_frame(msg_type: int, seq: int, timestamp_us: int, payload: bytes, version: int = PROTOCOL_VERSION) -> bytes:
+    """The frame's bytes on the wire: ``encode_frame(pack_frame(...))``, COBS and delimiter included; the same
+    bytes in one compiled call (`kernels.frame_encode`) where the kernels can be had."""
+    head = _pack_header(msg_type, seq, timestamp_us, payload, version)
+    if kernels.AVAILABLE:
+        return kernels.frame_encode(head + payload)
+    return encode_frame(b"".join((head, payload, _CRC.pack(crc16(payload, crc16(head))))))
+
+
+def _pack_header(msg_type: int, seq: int, timestamp_us: int, payload: bytes, version: int) -> bytes:
+    """The 18 header bytes of a frame carrying `payload`; raise `ValueError` if a field does not fit."""
     if len(payload) > MAX_PAYLOAD:
         raise ValueError(f"payload of {len(payload)} bytes exceeds MAX_PAYLOAD = {MAX_PAYLOAD}")
     try:
-        head = HEADER.pack(MAGIC, version, msg_type, seq % SEQ_MODULUS, timestamp_us, len(payload))
+        return HEADER.pack(MAGIC, version, msg_type, seq % SEQ_MODULUS, timestamp_us, len(payload))
     except struct.error as exc:
         raise ValueError(f"header field out of range: {exc}") from exc
-    payload = bytes(payload)
-    return b"".join((head, payload, _CRC.pack(crc16(payload, crc16(head)))))
 
 
 _TYPES: dict[int, MessageType] = {int(t): t for t in MessageType}

@@ -1,6 +1,7 @@
 /*
  * kernels.c - the native protocol's framing kernels, compiled on first use (protocols/kernels.py):
- * CRC-16/CCITT-FALSE sliced by 8 bytes, and COBS encoding and decoding a run at a time.
+ * CRC-16/CCITT-FALSE sliced by 8 bytes, COBS encoding and decoding a run at a time, and the two fused into the
+ * wire bytes of one frame.
  *
  * They compute exactly what protocols/crc.py and protocols/cobs.py define (tests/test_framing.py compares them
  * with the Python references); no state, no allocation: the caller passes the output buffer.
@@ -10,6 +11,9 @@
 #include <string.h>
 
 #define COBS_MAX_BLOCK 254
+#define MAX_FRAME 4116 /* protocols/framing.py MAX_FRAME_SIZE: header, payload and CRC (tests/test_framing.py) */
+
+const size_t eyehil_max_frame = MAX_FRAME;
 
 /* table[k][b]: the CRC register after byte b and then k zero bytes, from a zero register. */
 static uint16_t table[8][256];
@@ -88,4 +92,21 @@ long eyehil_cobs_decode(const uint8_t *src, size_t n, uint8_t *dst)
             dst[out++] = 0;
     }
     return (long)out;
+}
+
+/* The wire bytes of the frame whose header and payload are raw[0..n): COBS of raw followed by its CRC-16 (low
+ * byte first), then the 0x00 delimiter, into dst (room for n + 2 + (n + 2) / 254 + 2 bytes). Returns their
+ * length, or 0 if the frame would exceed MAX_FRAME bytes. */
+size_t eyehil_frame_encode(const uint8_t *raw, size_t n, uint8_t *dst)
+{
+    uint8_t frame[MAX_FRAME];
+    if (n > MAX_FRAME - 2)
+        return 0;
+    memcpy(frame, raw, n);
+    uint16_t crc = eyehil_crc16(raw, n, 0xFFFFu);
+    frame[n] = (uint8_t)(crc & 0xFFu);
+    frame[n + 1] = (uint8_t)(crc >> 8);
+    size_t len = eyehil_cobs_encode(frame, n + 2, dst);
+    dst[len] = 0;
+    return len + 1;
 }

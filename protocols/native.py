@@ -14,8 +14,7 @@ from __future__ import annotations
 from eyehil.protocols import cobs
 from eyehil.protocols.enums import Capability, EyeSelect, StreamSelect
 from eyehil.protocols.errors import ErrorCode, MalformedPayloadError, ProtocolError, UnknownMessageTypeError
-from eyehil.protocols.framing import encode_frame
-from eyehil.protocols.header import SUPPORTED_VERSIONS, Header, MessageType, pack_frame, unpack_frame
+from eyehil.protocols.header import SUPPORTED_VERSIONS, Header, MessageType, pack_frame, unpack_frame, wire_frame
 from eyehil.protocols.messages import Configure, GetInfo, GetStatus, Ping, Start, Stimulus, Stop, truncate_utf8
 from eyehil.protocols.replies import Ack, DeviceInfo, ErrorReply, Pong, Status
 from eyehil.protocols.samples import Features, FrameChunk
@@ -42,7 +41,7 @@ def encode_raw(message: Message, seq: int, timestamp_us: int) -> bytes:
 
 def encode(message: Message, seq: int, timestamp_us: int) -> bytes:
     """Wire bytes of `message`: COBS-encoded frame followed by the 0x00 delimiter."""
-    return encode_frame(encode_raw(message, seq, timestamp_us))
+    return wire_frame(message.TYPE, seq, timestamp_us, message.to_payload())
 
 
 def decode(

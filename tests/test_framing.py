@@ -21,6 +21,7 @@ from eyehil.protocols.framing import (
     FramingFault,
     encode_frame,
 )
+from eyehil.protocols.header import MAX_PAYLOAD, pack_frame, wire_frame
 
 # Written from the definition (Cheshire & Baker 1999), the examples also listed on Wikipedia's COBS page.
 COBS_KNOWN = [
@@ -209,6 +210,44 @@ def test_crc_kernel_matches_binascii_property(data: bytes, value: int, cut: int)
     assert kernels.crc16(data, value) == binascii.crc_hqx(data, value)
     assert kernels.crc16(bytearray(data), value) == kernels.crc16(memoryview(data), value) == crc16(data, value)
     assert kernels.crc16(data[cut:], kernels.crc16(data[:cut], value)) == binascii.crc_hqx(data, value)
+
+
+@NO_KERNELS
+def test_the_kernels_frame_limit_is_the_protocols() -> None:
+    assert kernels.MAX_FRAME == MAX_FRAME_SIZE
+
+
+@pytest.mark.parametrize("compiled", [pytest.param(True, marks=NO_KERNELS, id="compiled"),
+                                      pytest.param(False, id="python")])
+@settings(max_examples=300, deadline=None)
+@given(msg_type=st.integers(0, 255), seq=st.integers(0, 2**33), timestamp=st.integers(0, 2**64 - 1),
+       payload=st.one_of(st.binary(max_size=600), st.binary(min_size=MAX_PAYLOAD - 300, max_size=MAX_PAYLOAD)))
+def test_wire_frame_is_pack_frame_then_encode_frame_property(compiled: bool, msg_type: int, seq: int,
+                                                               timestamp: int, payload: bytes) -> None:
+    """The fused encode (CRC, COBS and delimiter in one kernel call) gives the two-step path's bytes, up to the
+    largest payload; the Python path when the kernels are switched off gives them too."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(kernels, "AVAILABLE", compiled)
+        wire = wire_frame(msg_type, seq, timestamp, payload)
+    assert wire == encode_frame(pack_frame(msg_type, seq, timestamp, payload))
+    assert type(wire) is bytes and wire.endswith(b"\x00") and wire.count(0) == 1
+
+
+@pytest.mark.parametrize("compiled", [pytest.param(True, marks=NO_KERNELS, id="compiled"),
+                                      pytest.param(False, id="python")])
+def test_wire_frame_refuses_what_pack_frame_refuses(compiled: bool, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(kernels, "AVAILABLE", compiled)
+    with pytest.raises(ValueError, match="MAX_PAYLOAD"):
+        wire_frame(0x91, 1, 0, bytes(MAX_PAYLOAD + 1))
+    with pytest.raises(ValueError, match="out of range"):
+        wire_frame(0x91, 1, -1, b"")
+
+
+@NO_KERNELS
+def test_frame_encode_refuses_a_frame_over_the_limit() -> None:
+    assert kernels.frame_encode(bytes(MAX_FRAME_SIZE - 2)).endswith(b"\x00")
+    with pytest.raises(ValueError, match="exceeds"):
+        kernels.frame_encode(bytes(MAX_FRAME_SIZE - 1))
 
 
 def test_encode_frame_adds_one_delimiter_and_refuses_oversized() -> None:
