@@ -4,18 +4,20 @@ The library goes into the cache folder (`cache_dir`: $EYEHIL_CACHE, else $XDG_CA
 ~/.cache/eyehil), named by the source's stem and a hash of its bytes and the compiler's flags, so that a changed
 source is rebuilt; it is compiled to a temporary name and renamed, so processes that build it at once never load a
 half-written file. Without a C compiler (`$CC`, else `cc`) or when the build fails, `build` raises
-`BuildUnavailableError` with the reason, and the caller runs without the library.
+`BuildUnavailableError` with the reason, and the caller runs without the library. `load` builds and loads a
+library of compiled kernels, or says why not: EYEHIL_PURE_PYTHON=1 asks every caller to run its Python path.
 
 A leaf below the layers (tests/test_house.py): it imports no eyehil module.
 """
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import os
 import shutil
 import subprocess
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 COMPILE_TIMEOUT_S = 120.0
@@ -57,3 +59,17 @@ def build(source: Path, folder: Path | None = None, flags: Sequence[str] = ("-O2
     finally:
         scratch.unlink(missing_ok=True)
     return target
+
+
+def load(source: Path, declare: Callable[[ctypes.CDLL], None], flags: Sequence[str] = ("-O2",)
+         ) -> tuple[ctypes.CDLL | None, str]:
+    """The library of kernels built from `source`, its functions typed by `declare`, and ""; or None and why not
+    (EYEHIL_PURE_PYTHON is set, or the library cannot be built or loaded)."""
+    if os.environ.get("EYEHIL_PURE_PYTHON"):
+        return None, "EYEHIL_PURE_PYTHON is set"
+    try:
+        lib = ctypes.CDLL(str(build(source, flags=flags)))
+    except (BuildUnavailableError, OSError) as exc:
+        return None, str(exc)
+    declare(lib)
+    return lib, ""

@@ -14,22 +14,15 @@ write past it (`kernels.c`).
 from __future__ import annotations
 
 import ctypes
-import os
 from pathlib import Path
 
-from eyehil.cbuild import BuildUnavailableError, build
+from eyehil.cbuild import load
 
 SOURCE = Path(__file__).with_name("kernels.c")
 MAX_BLOCK = 254  # COBS data bytes in a 0xFF block
 
 
-def _load() -> tuple[ctypes.CDLL | None, str]:
-    if os.environ.get("EYEHIL_PURE_PYTHON"):
-        return None, "EYEHIL_PURE_PYTHON is set"
-    try:
-        lib = ctypes.CDLL(str(build(SOURCE, flags=("-O2",))))
-    except (BuildUnavailableError, OSError) as exc:
-        return None, str(exc)
+def _declare(lib: ctypes.CDLL) -> None:
     lib.eyehil_crc16.argtypes = (ctypes.c_char_p, ctypes.c_size_t, ctypes.c_uint16)
     lib.eyehil_crc16.restype = ctypes.c_uint16
     lib.eyehil_cobs_encode.argtypes = (ctypes.c_char_p, ctypes.c_size_t, ctypes.c_char_p)
@@ -38,10 +31,9 @@ def _load() -> tuple[ctypes.CDLL | None, str]:
     lib.eyehil_cobs_decode.restype = ctypes.c_long
     lib.eyehil_frame_encode.argtypes = (ctypes.c_char_p, ctypes.c_size_t, ctypes.c_char_p)
     lib.eyehil_frame_encode.restype = ctypes.c_size_t
-    return lib, ""
 
 
-_LIB, REASON = _load()
+_LIB, REASON = load(SOURCE, _declare)
 AVAILABLE = _LIB is not None
 #: The longest frame (header, payload, CRC) `frame_encode` takes: `eyehil.protocols.framing.MAX_FRAME_SIZE`.
 MAX_FRAME = ctypes.c_size_t.in_dll(_LIB, "eyehil_max_frame").value if AVAILABLE else 0

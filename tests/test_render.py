@@ -6,10 +6,13 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from eyehil.emulator.eye.normative import normative_eye
 from eyehil.emulator.eye.published import published_eyes
 from eyehil.emulator.forward import Poses, simulate
+from eyehil.emulator.render import kernels
 from eyehil.emulator.render.geometry import _upsampler, eye_outlines, pupil_polar
 from eyehil.emulator.render.renderer import (
     Appearance,
@@ -106,8 +109,15 @@ def test_frames_are_deterministic_given_the_generator(guestrin):
     assert np.any(a != c)
 
 
+NO_KERNEL = pytest.mark.skipif(not kernels.AVAILABLE, reason=f"compiled kernel unavailable: {kernels.REASON}")
+#: expose's flat-canvas path: the compiled kernel where it is built, and the numpy path.
+FLAT_PATHS = [pytest.param(True, marks=NO_KERNEL, id="compiled"), pytest.param(False, id="numpy")]
+
+
+@pytest.mark.parametrize("compiled", FLAT_PATHS)
 @pytest.mark.parametrize("sensor", [Sensor(), Sensor(gain_db=12.0, read_noise_dn=3.0), Sensor(saturation_dn=1023)])
-def test_flat_regions_from_the_table_equal_the_pixel_by_pixel_noise(sensor) -> None:
+def test_flat_regions_from_the_table_equal_the_pixel_by_pixel_noise(sensor, compiled, monkeypatch) -> None:
+    monkeypatch.setattr(kernels, "AVAILABLE", compiled)
     rng = np.random.default_rng(3)
     canvas = np.full((120, 160), np.float32(40.0 * 10 ** (sensor.gain_db / 20)), np.float32)
     boxes = [(10, 60, 20, 90), (40, 110, 70, 150), None]  # the first two overlap
@@ -119,6 +129,44 @@ def test_flat_regions_from_the_table_equal_the_pixel_by_pixel_noise(sensor) -> N
     plain = expose(canvas.copy(), sensor, np.random.default_rng(9))
     assert flat.dtype == plain.dtype and np.array_equal(flat, plain)
     assert len(np.unique(flat[-30:, :15])) > 3  # the flat part is noisy, not a constant
+
+
+@NO_KERNEL
+@settings(max_examples=150, deadline=None)
+@given(data=st.data(), sensor=st.sampled_from([Sensor(), Sensor(gain_db=18.0, read_noise_dn=4.0),
+                                               Sensor(saturation_dn=4095, full_well_e=3000.0)]))
+def test_the_compiled_exposure_is_the_numpy_one_bit_for_bit_property(data, sensor) -> None:
+    """Any window size, level and set of boxes (overlapping, touching the edges, empty, None): the kernel gives
+    the numpy path's image and leaves the canvas as it was."""
+    h, w = data.draw(st.integers(1, 60)), data.draw(st.integers(1, 80))
+    level = data.draw(st.floats(0.0, 1.1 * sensor.saturation_dn, width=32))
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**32)))
+    canvas = np.full((h, w), level, np.float32)
+    edges = st.tuples(st.integers(0, h), st.integers(0, h), st.integers(0, w), st.integers(0, w))
+    boxes = [None if b is None else (min(b[:2]), max(b[:2]), min(b[2:]), max(b[2:]))
+             for b in data.draw(st.lists(st.one_of(st.none(), edges), max_size=4))]
+    for box in boxes:
+        if box is not None:
+            r0, r1, c0, c1 = box
+            canvas[r0:r1, c0:c1] = rng.uniform(-5.0, 1.3 * sensor.saturation_dn, (r1 - r0, c1 - c0))
+    seed = int(rng.integers(2**32))
+    before = canvas.copy()
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(kernels, "AVAILABLE", False)
+        expected = expose(canvas.copy(), sensor, np.random.default_rng(seed), flat=(level, boxes))
+    got = expose(canvas, sensor, np.random.default_rng(seed), flat=(level, boxes))
+    assert got.dtype == expected.dtype and np.array_equal(got, expected)
+    assert np.array_equal(canvas, before)
+
+
+@NO_KERNEL
+def test_the_compiled_exposure_refuses_mismatched_arrays() -> None:
+    signal, draws = np.zeros((4, 5), np.float32), np.zeros((5, 4), np.uint16)
+    table = np.zeros(65536, np.uint8)
+    with pytest.raises(ValueError, match="same 2-D shape"):
+        kernels.expose_flat(signal, draws, table, [], table.astype(np.float32), *np.float32([0.1, 1.0, 255.49]))
+    with pytest.raises(ValueError, match="65,536"):
+        kernels.expose_flat(signal, draws.T, table[:10], [], table.astype(np.float32), *np.float32([0.1, 1.0, 255.49]))
 
 
 def test_uniform16_draws_every_value_evenly_and_reproducibly() -> None:

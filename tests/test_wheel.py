@@ -64,7 +64,8 @@ def test_the_wheel_has_one_top_level_name(wheel: Path) -> None:
     assert {"eyehil/py.typed", "eyehil/emulator/scene/presets/guestrin2006.toml",
             "eyehil/emulator/data/fischer2023_eyes.csv", "eyehil/analysis/study/data/published_results.json",
             "eyehil/drivers/urlhandlers/protocol_eyehil+loop.py",
-            "eyehil/emulator/device/lsl/loopback_bind.c", "eyehil/protocols/kernels.c"} <= set(names)
+            "eyehil/emulator/device/lsl/loopback_bind.c", "eyehil/protocols/kernels.c",
+            "eyehil/emulator/render/kernels.c"} <= set(names)
     entry_points = next(n for n in names if n.endswith("entry_points.txt"))
     text = zipfile.ZipFile(wheel).read(entry_points).decode()
     assert "eyehil = eyehil.cli:main" in text and "eyehil = eyehil.emulator.device.pytest_plugin" in text

@@ -33,6 +33,7 @@ from scipy.special import ndtri
 
 from eyehil.emulator.eye.model import EyeModel
 from eyehil.emulator.features import Features
+from eyehil.emulator.render import kernels
 from eyehil.emulator.render.draw import Box, Levels, draw_eye
 from eyehil.emulator.render.geometry import EyeOutline, aperture_distance, eye_outlines
 from eyehil.emulator.scene import Scene
@@ -224,7 +225,8 @@ def expose(signal: np.ndarray, sensor: Sensor, rng: np.random.Generator, *,
     `flat` (level, boxes): the signal is `level` everywhere outside `boxes` (canvas rows [r0, r1), columns
     [c0, c1)). Those pixels are then looked up in the table of that level's 65,536 outcomes (`flat_table`) and
     only the boxes are computed pixel by pixel: the same uniform draws and the same float32 arithmetic, so the
-    same image, bit for bit."""
+    same image, bit for bit; the compiled kernel (`kernels.expose_flat`) does that in one pass where it can be
+    had, and leaves `signal` as it is."""
     read, k = _noise(sensor)
     if not (read > 0 or k > 0):
         return _quantise(signal, sensor)
@@ -232,6 +234,9 @@ def expose(signal: np.ndarray, sensor: Sensor, rng: np.random.Generator, *,
     if flat is None:
         return _pixels(signal, uniform, sensor, _scratch(signal.shape)[1:])
     level, boxes = flat
+    if kernels.AVAILABLE:  # the same image in one compiled pass (eyehil.emulator.render.kernels)
+        return kernels.expose_flat(signal, uniform, flat_table(float(level), sensor), boxes, _NORMAL_TABLE,
+                                   np.float32(k), np.float32(read * read), np.float32(sensor.saturation_dn + 0.49))
     out = np.take(flat_table(float(level), sensor), uniform)
     for box in boxes:
         if box is not None:

@@ -1,0 +1,63 @@
+/*
+ * kernels.c - the renderer's compiled kernel, built on first use (emulator/render/kernels.py): a canvas through
+ * the sensor's noise in one pass, the same image bit for bit as renderer.expose's numpy path
+ * (tests/test_render.py compares them).
+ *
+ * Built with -ffp-contract=off: every operation is one IEEE float32 operation, in numpy's order, never fused.
+ */
+#include <stddef.h>
+#include <stdint.h>
+
+/* The pixel of signal s with the noise of uniform draw u, as renderer._pixels then _quantise compute it:
+ * sigma = sqrt(max(s k, 0) + read2) * normal[u]; clip(s + sigma + 0.5, 0, hi), truncated. */
+static inline float noisy(float s, uint16_t u, const float *normal, float k, float read2, float hi)
+{
+    float sigma = s * k;
+    sigma = sigma > 0.0f ? sigma : 0.0f;
+    sigma += read2;
+    sigma = __builtin_sqrtf(sigma);
+    sigma *= normal[u];
+    float v = s + sigma;
+    v += 0.5f;
+    v = v > 0.0f ? v : 0.0f;
+    return v < hi ? v : hi;
+}
+
+/* The image (rows x cols, row-major; 8-bit, or 16-bit if `wide`) of the canvas `signal` (float32, read only)
+ * with the draws `uniform` (one per pixel): flat[u] outside the boxes (the canvas is flat there, and flat[] is
+ * that level's outcome of each draw), each pixel computed inside them. `boxes` holds `nboxes` rows
+ * (r0, r1, c0, c1) of canvas rows [r0, r1) and columns [c0, c1), clipped here to the canvas; boxes may overlap
+ * (a pixel is computed from the canvas, so the order does not matter). */
+void eyehil_expose(const float *signal, const uint16_t *uniform, size_t rows, size_t cols, const void *flat,
+                   const int64_t *boxes, size_t nboxes, const float *normal, float k, float read2, float hi,
+                   int wide, void *out)
+{
+    size_t n = rows * cols;
+    if (wide) {
+        const uint16_t *table = flat;
+        uint16_t *dst = out;
+        for (size_t i = 0; i < n; i++)
+            dst[i] = table[uniform[i]];
+    } else {
+        const uint8_t *table = flat;
+        uint8_t *dst = out;
+        for (size_t i = 0; i < n; i++)
+            dst[i] = table[uniform[i]];
+    }
+    for (size_t b = 0; b < nboxes; b++) {
+        const int64_t *box = boxes + 4 * b;
+        size_t r0 = box[0] < 0 ? 0 : (size_t)box[0], r1 = box[1] < 0 ? 0 : (size_t)box[1];
+        size_t c0 = box[2] < 0 ? 0 : (size_t)box[2], c1 = box[3] < 0 ? 0 : (size_t)box[3];
+        r1 = r1 < rows ? r1 : rows;
+        c1 = c1 < cols ? c1 : cols;
+        for (size_t r = r0; r < r1; r++)
+            for (size_t c = c0; c < c1; c++) {
+                size_t i = r * cols + c;
+                float v = noisy(signal[i], uniform[i], normal, k, read2, hi);
+                if (wide)
+                    ((uint16_t *)out)[i] = (uint16_t)v;
+                else
+                    ((uint8_t *)out)[i] = (uint8_t)v;
+            }
+    }
+}
