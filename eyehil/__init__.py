@@ -11,7 +11,7 @@ The package (each subpackage's docstring names its modules; README.md has the co
   workflow);
 - `stopping`: a command's wait for SIGTERM or Ctrl-C, in slices (the signal may land on another thread);
 - `cbuild`: a C source of the package built into a shared library on first use, cached (the framing's kernels,
-  the LSL outlet's loopback bind);
+  the renderer's noise kernel, the LSL outlet's loopback bind);
 - `cli`: the `eyehil` command (a thin dispatcher; `__main__`: ``python -m eyehil``); `emulate_view`: the
   live view beside the device for `eyehil emulate --view` (the one place the two meet outside analysis).
 

@@ -2,7 +2,7 @@
 
 - `cobs`, `crc`, `framing`: COBS frames delimited by 0x00 and an incremental, never-raising decoder;
   `kernels`: the same CRC and COBS compiled (`kernels.c`, built once per machine on first import; the one
-  exception to "no I/O"), used by `crc` and `cobs` where they can be had;
+  exception to "no I/O"), used by `crc`, `cobs` and `header.wire_frame` where they can be had;
 - `header`, `messages`, `replies`, `samples`, `native`: the eyehil native protocol (docs/protocol.md);
 - `stream`: bytes in, decoded messages, faults, counters and sequence gaps out;
 - `batch`: vectorised FEATURES encoding/decoding with numpy; `images`: FRAME_CHUNK split/reassembly;

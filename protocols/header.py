@@ -85,10 +85,9 @@ def pack_frame(msg_type: int, seq: int, timestamp_us: int, payload: bytes, versi
 def wire_frame(msg_type: int, seq: int, timestamp_us: int, payload: bytes, version: int = PROTOCOL_VERSION) -> bytes:
     """The frame's bytes on the wire: ``encode_frame(pack_frame(...))``, COBS and delimiter included; the same
     bytes in one compiled call (`kernels.frame_encode`) where the kernels can be had."""
-    head = _pack_header(msg_type, seq, timestamp_us, payload, version)
-    if kernels.AVAILABLE:
-        return kernels.frame_encode(head + payload)
-    return encode_frame(b"".join((head, payload, _CRC.pack(crc16(payload, crc16(head))))))
+    if not kernels.AVAILABLE:
+        return encode_frame(pack_frame(msg_type, seq, timestamp_us, payload, version))
+    return kernels.frame_encode(_pack_header(msg_type, seq, timestamp_us, payload, version) + payload)
 
 
 def _pack_header(msg_type: int, seq: int, timestamp_us: int, payload: bytes, version: int) -> bytes:
