@@ -1,6 +1,9 @@
 """Camera images as FRAME_CHUNK messages: split on the device side, reassemble on the host side.
 
-Pure helpers around `eyehil.protocols.samples.FrameChunk`. The device sends the chunks of one image in order,
+Pure helpers around `eyehil.protocols.samples.FrameChunk`. `split_image` gives an image's chunks as messages;
+`ImageChunks` gives their wire bytes a run at a time, numbered as they go (the device's path: one compiled call
+a run, `eyehil.protocols.kernels.chunk_frames`, the same bytes as encoding each `split_image` chunk with
+`eyehil.protocols.native.encode`). The device sends the chunks of one image in order,
 and may abandon an image (link too slow, STOP): the host's `ImageAssembler` then drops the partial
 image when a chunk of a newer frame id arrives and counts it in ``incomplete``.
 
@@ -12,13 +15,15 @@ count), is refused and counted in ``refused``, before any allocation.
 
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass, field
 from operator import attrgetter
 
 import numpy as np
 
+from eyehil.protocols import kernels
 from eyehil.protocols.enums import Eye, PixelFormat
-from eyehil.protocols.header import MAX_PAYLOAD
+from eyehil.protocols.header import MAX_PAYLOAD, PROTOCOL_VERSION, MessageType, wire_frame
 from eyehil.protocols.samples import FrameChunk
 
 MAX_CHUNK_DATA = MAX_PAYLOAD - FrameChunk.STRUCT.size  # 4074 pixel bytes per chunk
@@ -26,22 +31,69 @@ MAX_IMAGE_BYTES = 4096 * 4096 * 2  # 32 MiB: the largest image a host reassemble
 _FORMATS = {np.dtype(np.uint8): PixelFormat.MONO8, np.dtype("<u2"): PixelFormat.MONO16}
 
 
-def split_image(
-    frame_id: int, eye: Eye, image: np.ndarray, roi_xy: tuple[int, int] = (0, 0), chunk_data: int = MAX_CHUNK_DATA
-) -> list[FrameChunk]:
-    """FRAME_CHUNKs of a 2-D uint8 or uint16 `image` whose top-left pixel is at `roi_xy` on the sensor."""
+def _pixels(image: np.ndarray, chunk_data: int) -> tuple[PixelFormat, bytes, int]:
+    """The pixel format, little-endian bytes and chunk count of `image`; ValueError if it cannot be sent."""
     if image.ndim != 2 or np.dtype(image.dtype).newbyteorder("<") not in _FORMATS:
         raise ValueError(f"expected a 2-D uint8 or uint16 image, got {image.dtype} {image.shape}")
     if not 0 < chunk_data <= MAX_CHUNK_DATA:
         raise ValueError(f"chunk_data must be in 1..{MAX_CHUNK_DATA}")
-    fmt = _FORMATS[np.dtype(image.dtype).newbyteorder("<")]
     raw = np.ascontiguousarray(image, dtype=image.dtype.newbyteorder("<")).tobytes()
-    count = max(1, -(-len(raw) // chunk_data))
+    return _FORMATS[np.dtype(image.dtype).newbyteorder("<")], raw, max(1, -(-len(raw) // chunk_data))
+
+
+def split_image(
+    frame_id: int, eye: Eye, image: np.ndarray, roi_xy: tuple[int, int] = (0, 0), chunk_data: int = MAX_CHUNK_DATA
+) -> list[FrameChunk]:
+    """FRAME_CHUNKs of a 2-D uint8 or uint16 `image` whose top-left pixel is at `roi_xy` on the sensor."""
+    fmt, raw, count = _pixels(image, chunk_data)
     height, width = image.shape
     return [
         FrameChunk(frame_id, eye, fmt, width, height, *roi_xy, k, count, start, raw[start : start + chunk_data])
         for k, start in enumerate(range(0, count * chunk_data, chunk_data))
     ]
+
+
+class ImageChunks:
+    """The FRAME_CHUNKs of one image still to be sent (the device's side): `wire` encodes the next run of them.
+
+    Checked as `split_image` checks (ValueError for an image or roi the protocol cannot carry); `sent` chunks of
+    `count` are gone, `done` once all are."""
+
+    def __init__(self, frame_id: int, eye: Eye, image: np.ndarray, roi_xy: tuple[int, int] = (0, 0),
+                 chunk_data: int = MAX_CHUNK_DATA) -> None:
+        fmt, self._raw, self.count = _pixels(image, chunk_data)
+        height, width = image.shape
+        self._chunk_data = chunk_data
+        self._fields = (frame_id, eye, fmt, width, height, *roi_xy)
+        try:  # the chunk head with index and offset 0: the kernel fills them in
+            self._head = FrameChunk.STRUCT.pack(*self._fields, 0, self.count, 0)
+        except struct.error as exc:
+            raise ValueError(f"FrameChunk: {exc}") from exc
+        self.sent = 0
+
+    @property
+    def done(self) -> bool:
+        """Every chunk has been encoded."""
+        return self.sent >= self.count
+
+    def wire(self, seq: int, timestamp_us: int, room: int) -> tuple[bytes, int]:
+        """The wire bytes of the next chunks, numbered from `seq` (mod 2^32), stamped `timestamp_us`, added while
+        fewer than `room` bytes were written (none if `room` <= 0); and how many chunks they hold."""
+        first = self.sent
+        if kernels.AVAILABLE:
+            data, n = kernels.chunk_frames(self._raw, self._head, first, self.count, self._chunk_data, seq,
+                                           timestamp_us, PROTOCOL_VERSION, MessageType.FRAME_CHUNK, room)
+        else:
+            frames: list[bytes] = []
+            size, k, step = 0, first, self._chunk_data
+            while k < self.count and size < room:
+                chunk = FrameChunk(*self._fields, k, self.count, k * step, self._raw[k * step : (k + 1) * step])
+                frames.append(wire_frame(MessageType.FRAME_CHUNK, seq + k - first, timestamp_us, chunk.to_payload()))
+                size += len(frames[-1])
+                k += 1
+            data, n = b"".join(frames), k - first
+        self.sent += n
+        return data, n
 
 
 @dataclass(frozen=True)

@@ -110,3 +110,56 @@ size_t eyehil_frame_encode(const uint8_t *raw, size_t n, uint8_t *dst)
     dst[len] = 0;
     return len + 1;
 }
+
+static void put16(uint8_t *p, uint32_t v) { p[0] = (uint8_t)v; p[1] = (uint8_t)(v >> 8); }
+static void put32(uint8_t *p, uint32_t v) { put16(p, v & 0xFFFFu); put16(p + 2, v >> 16); }
+
+#define HEADER_SIZE 18
+#define CHUNK_HEAD 22 /* protocols/samples.py FrameChunk.STRUCT: frame id .. roi_y, chunk index (14), count, offset (18) */
+
+/* The wire bytes of the FRAME_CHUNKs first, first + 1, ... of one image (pixels image[0..size), `chunk_data`
+ * bytes a chunk, `count` chunks), numbered from `seq` (wrapping at 2^32) and stamped `timestamp_us`: each is
+ * `eyehil_frame_encode` of the 18-byte header (magic "EH", `version`, `type`, seq, timestamp, payload length), the
+ * 22-byte chunk head `head` with its index and byte offset filled in, and the chunk's pixels. Chunks are added
+ * while fewer than `room` bytes were written (so at least one when room > 0) and while the next one surely fits
+ * in `cap`; `*released` says how many. Returns the bytes written into dst, or 0 with *released = 0 if a chunk would
+ * exceed MAX_FRAME or lie outside the image. */
+size_t eyehil_chunk_frames(const uint8_t *image, size_t size, const uint8_t *head, uint32_t first, uint32_t count,
+                           size_t chunk_data, uint32_t seq, uint64_t timestamp_us, uint8_t version, uint8_t type,
+                           long room, uint8_t *dst, size_t cap, uint32_t *released)
+{
+    uint8_t frame[MAX_FRAME];
+    size_t used = 0;
+    uint32_t k = first;
+    *released = 0;
+    if (HEADER_SIZE + CHUNK_HEAD + chunk_data + 2 > MAX_FRAME || (size_t)count * chunk_data < size)
+        return 0;
+    frame[0] = 0x45;
+    frame[1] = 0x48;
+    frame[2] = version;
+    frame[3] = type;
+    for (int b = 0; b < 8; b++)
+        frame[8 + b] = (uint8_t)(timestamp_us >> (8 * b));
+    memcpy(frame + HEADER_SIZE, head, CHUNK_HEAD);
+    for (; k < count && (long)used < room; k++) {
+        size_t offset = (size_t)k * chunk_data;
+        if (offset >= size)
+            return *released = 0, 0;
+        size_t len = size - offset < chunk_data ? size - offset : chunk_data;
+        size_t n = HEADER_SIZE + CHUNK_HEAD + len;
+        if (used + n + 2 + (n + 2) / COBS_MAX_BLOCK + 2 > cap)
+            break;
+        put32(frame + 4, seq + (k - first));
+        put16(frame + 16, (uint32_t)(CHUNK_HEAD + len));
+        put16(frame + HEADER_SIZE + 14, k);
+        put32(frame + HEADER_SIZE + 18, (uint32_t)offset);
+        memcpy(frame + HEADER_SIZE + CHUNK_HEAD, image + offset, len);
+        uint16_t crc = eyehil_crc16(frame, n, 0xFFFFu);
+        frame[n] = (uint8_t)(crc & 0xFFu);
+        frame[n + 1] = (uint8_t)(crc >> 8);
+        used += eyehil_cobs_encode(frame, n + 2, dst + used);
+        dst[used++] = 0;
+    }
+    *released = k - first;
+    return used;
+}

@@ -31,6 +31,11 @@ def _declare(lib: ctypes.CDLL) -> None:
     lib.eyehil_cobs_decode.restype = ctypes.c_long
     lib.eyehil_frame_encode.argtypes = (ctypes.c_char_p, ctypes.c_size_t, ctypes.c_char_p)
     lib.eyehil_frame_encode.restype = ctypes.c_size_t
+    lib.eyehil_chunk_frames.argtypes = (ctypes.c_char_p, ctypes.c_size_t, ctypes.c_char_p, ctypes.c_uint32,
+                                        ctypes.c_uint32, ctypes.c_size_t, ctypes.c_uint32, ctypes.c_uint64,
+                                        ctypes.c_uint8, ctypes.c_uint8, ctypes.c_long, ctypes.c_char_p,
+                                        ctypes.c_size_t, ctypes.POINTER(ctypes.c_uint32))
+    lib.eyehil_chunk_frames.restype = ctypes.c_size_t
 
 
 _LIB, REASON = load(SOURCE, _declare)
@@ -70,3 +75,19 @@ def frame_encode(raw: bytes) -> bytes:
     if size == 0:
         raise ValueError(f"frame of {n} bytes exceeds the maximum of {MAX_FRAME}")
     return ctypes.string_at(out, size)
+
+
+def chunk_frames(pixels: bytes, head: bytes, first: int, count: int, chunk_data: int, seq: int, timestamp_us: int,
+                 version: int, msg_type: int, room: int) -> tuple[bytes, int]:
+    """The wire bytes of chunks `first`, `first` + 1, ... of the image `pixels` (`count` chunks of `chunk_data` bytes;
+    `head` the 22-byte chunk head, its index and offset filled in per chunk), numbered from `seq`, while fewer than
+    `room` bytes were written; and how many chunks they hold. ValueError if a chunk would not fit a frame."""
+    frame = 18 + 22 + chunk_data + 2
+    cap = min(count - first, max(0, room) // frame + 1) * (frame + frame // MAX_BLOCK + 2)
+    out = ctypes.create_string_buffer(max(1, cap))
+    released = ctypes.c_uint32()
+    size = _LIB.eyehil_chunk_frames(pixels, len(pixels), head, first, count, chunk_data, seq & 0xFFFFFFFF,
+                                    timestamp_us, version, msg_type, room, out, cap, ctypes.byref(released))
+    if size == 0 and room > 0 and first < count:
+        raise ValueError(f"chunks of {chunk_data} bytes do not fit a frame, or {count} chunks miss the image")
+    return ctypes.string_at(out, size), released.value

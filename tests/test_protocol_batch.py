@@ -1,4 +1,5 @@
-"""Vectorised FEATURES codec against the per-message codec, and camera images as FRAME_CHUNKs."""
+"""Vectorised FEATURES codec against the per-message codec, and camera images as FRAME_CHUNKs (split, encoded a run at
+a time, reassembled)."""
 
 from __future__ import annotations
 
@@ -6,11 +7,13 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from eyehil.protocols import CrcError, Eye, FrameChunk, MalformedPayloadError, cobs, decode_wire, encode
+from eyehil.protocols import CrcError, Eye, FrameChunk, MalformedPayloadError, cobs, decode_wire, encode, kernels
 from eyehil.protocols.batch import FeaturesBatch, decode_features_batch, encode_features_batch, features_dtype
 from eyehil.protocols.errors import BadLengthError
-from eyehil.protocols.images import MAX_CHUNK_DATA, ImageAssembler, split_image
+from eyehil.protocols.images import MAX_CHUNK_DATA, ImageAssembler, ImageChunks, split_image
 from eyehil.protocols.samples import EyeFeatures, Features, Glint
 
 
@@ -141,3 +144,69 @@ def test_assembler_drops_an_image_whose_chunks_disagree_on_its_geometry() -> Non
     assembler = ImageAssembler()
     assert [assembler.add(c) for c in (first, *rest)][-1].pixels.tobytes() == image.tobytes()
     assert assembler.inconsistent == 0 and assembler.complete == 1
+
+
+KERNEL_PATHS = [pytest.param(True, id="compiled", marks=pytest.mark.skipif(
+                    not kernels.AVAILABLE, reason=f"compiled kernels unavailable: {kernels.REASON}")),
+                pytest.param(False, id="python")]
+
+
+def _wire_in_runs(chunks: ImageChunks, seq: int, timestamp_us: int, rooms) -> tuple[list[bytes], list[int]]:
+    """An image's wire bytes taken in runs of the given rooms (the last one repeated until the image is done)."""
+    runs, counts, k = [], [], 0
+    while not chunks.done:
+        data, n = chunks.wire(seq + sum(counts), timestamp_us, rooms[min(k, len(rooms) - 1)])
+        runs.append(data)
+        counts.append(n)
+        k += 1
+    return runs, counts
+
+
+@pytest.mark.parametrize("compiled", KERNEL_PATHS)
+@settings(max_examples=60, deadline=None)
+@given(shape=st.tuples(st.integers(1, 60), st.integers(1, 90)), wide=st.booleans(), chunk_data=st.integers(1, 4074),
+       seq=st.integers(0, 2**32 - 1), timestamp=st.integers(0, 2**64 - 1),
+       rooms=st.lists(st.integers(1, 20_000), min_size=1, max_size=5), zeros=st.floats(0.0, 1.0),
+       roi=st.tuples(st.integers(0, 65535), st.integers(0, 65535)))
+def test_image_chunks_are_the_split_chunks_encoded_property(compiled: bool, shape, wide: bool, chunk_data: int,
+                                                            seq: int, timestamp: int, rooms, zeros: float,
+                                                            roi) -> None:
+    """A run of chunks from `ImageChunks.wire` is byte for byte `encode` of the `split_image` chunks, numbered on
+    from `seq` (wrapping at 2^32), in whatever runs the room allows: each run stops once it holds `room` bytes or
+    more; the compiled kernel and the Python path alike."""
+    rng = np.random.default_rng(abs(hash((shape, chunk_data, seq))) % 2**32)
+    image = rng.integers(0, 65536 if wide else 256, shape).astype("<u2" if wide else np.uint8)
+    image[rng.random(shape) < zeros] = 0  # runs of zeros exercise COBS
+    reference = [encode(c, (seq + k) % 2**32, timestamp)
+                 for k, c in enumerate(split_image(7, Eye.LEFT, image, roi, chunk_data))]
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(kernels, "AVAILABLE", compiled)
+        chunks = ImageChunks(7, Eye.LEFT, image, roi, chunk_data)
+        runs, counts = _wire_in_runs(chunks, seq, timestamp, rooms)
+    assert b"".join(runs) == b"".join(reference) and sum(counts) == chunks.count == len(reference)
+    done = 0
+    for k, (data, n) in enumerate(zip(runs, counts, strict=True)):
+        room = rooms[min(k, len(rooms) - 1)]
+        assert n >= 1 and data == b"".join(reference[done:done + n])
+        assert len(data) - len(reference[done + n - 1]) < room  # the run's last chunk started under the room
+        assert done + n == len(reference) or len(data) >= room  # it stopped only when full, or at the image's end
+        done += n
+
+
+@pytest.mark.parametrize("compiled", KERNEL_PATHS)
+def test_image_chunks_send_nothing_without_room_and_refuse_what_split_image_refuses(compiled: bool,
+                                                                                   monkeypatch) -> None:
+    monkeypatch.setattr(kernels, "AVAILABLE", compiled)
+    image = np.arange(240 * 320, dtype=np.uint32).astype(np.uint8).reshape(240, 320)
+    chunks = ImageChunks(3, Eye.RIGHT, image, (0, 0))
+    assert chunks.wire(0, 0, 0) == (b"", 0) and chunks.wire(0, 0, -5) == (b"", 0) and chunks.sent == 0
+    data, n = chunks.wire(0, 0, 10**9)
+    assert n == chunks.count == 19 and chunks.done and chunks.wire(19, 0, 10**9) == (b"", 0)
+    assert [decode_wire(f + b"\x00")[0].seq for f in data.split(b"\x00")[:-1]] == list(range(19))
+    for bad in (np.zeros((2, 2, 2), np.uint8), np.zeros((2, 2), np.float32)):
+        with pytest.raises(ValueError):
+            ImageChunks(1, Eye.RIGHT, bad)
+    with pytest.raises(ValueError):
+        ImageChunks(1, Eye.RIGHT, image, chunk_data=MAX_CHUNK_DATA + 1)
+    with pytest.raises(ValueError):
+        ImageChunks(1, Eye.RIGHT, image, roi_xy=(70_000, 0))

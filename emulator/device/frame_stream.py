@@ -43,9 +43,7 @@ from eyehil.emulator.device.render_pool import RenderJob, RenderPool
 from eyehil.emulator.device.subject import Subject
 from eyehil.emulator.render.renderer import DEFAULT_ROI, RenderSettings
 from eyehil.protocols.enums import Eye
-from eyehil.protocols.images import split_image
-from eyehil.protocols.native import encode
-from eyehil.protocols.samples import FrameChunk
+from eyehil.protocols.images import ImageChunks
 
 U32 = 1 << 32
 
@@ -79,8 +77,8 @@ class FrameStream:
         self._pool = RenderPool(renderer, self.options.workers, self.options.kind, on_done=self._done)  # start now
         self._sel: Selection | None = None
         self._ahead: deque[tuple[int, int, list[tuple[Eye, Future]]]] = deque()  # (frame id, time, images)
-        self._queue: deque[tuple[FrameChunk, int, bool]] = deque()  # chunks not yet released: timestamp, last of
-        # its exposure
+        self._queue: deque[tuple[ImageChunks, int, bool]] = deque()  # images with chunks not yet released: their
+        # exposure's timestamp, last image of its exposure
         self._queued_exposures = 0  # exposures with chunks in `_queue`
         self._open: dict[Eye, np.ndarray] = {}  # each eye's last row with open eyes (drawn shut in blinks)
         self._downstream = 0
@@ -123,7 +121,7 @@ class FrameStream:
 
     def stop(self) -> None:
         """The stream ends: images not wholly released are abandoned."""
-        self.dropped += sum(c.chunk_index == c.chunk_count - 1 for c, _, _ in self._queue)
+        self.dropped += len(self._queue)
         for _, _, images in self._ahead:
             for _, future in images:
                 future.cancel()
@@ -180,7 +178,7 @@ class FrameStream:
         """Move the chunks of rendered exposures, oldest first, to the release queue (in exposure order)."""
         while self._ahead and all(f.done() for _, f in self._ahead[0][2]):
             frame_id, time_us, images = self._ahead.popleft()
-            chunks: list[FrameChunk] = []
+            chunks: list[ImageChunks] = []
             for eye, future in images:
                 try:
                     rendered = future.result()
@@ -189,7 +187,7 @@ class FrameStream:
                     self.dropped += 1
                     logging.getLogger(__name__).exception("frame %d of eye %s not rendered", frame_id, eye)
                     continue
-                chunks += split_image(frame_id, eye, rendered.image, rendered.roi_xy)
+                chunks.append(ImageChunks(frame_id, eye, rendered.image, rendered.roi_xy))
             if chunks:
                 self._queue.extend((c, time_us, k == len(chunks) - 1) for k, c in enumerate(chunks))
                 self._queued_exposures += 1
@@ -210,12 +208,16 @@ class FrameStream:
         not yet read) stay under the budget; return the bytes and how many chunks they hold."""
         self._collect()
         frames: list[bytes] = []
-        size = 0  # bytes in `frames`
-        while self._queue and self._downstream + queued + size < self.options.budget_bytes:
-            chunk, time_us, last = self._queue.popleft()
-            frames.append(encode(chunk, (seq + len(frames)) % U32, time_us))
-            size += len(frames[-1])
-            self.sent += chunk.chunk_index == chunk.chunk_count - 1
-            self._queued_exposures -= last
+        size = count = 0  # bytes and chunks in `frames`
+        while self._queue and (room := self.options.budget_bytes - self._downstream - queued - size) > 0:
+            image, time_us, last = self._queue[0]
+            data, n = image.wire((seq + count) % U32, time_us, room)
+            frames.append(data)
+            size += len(data)
+            count += n
+            if image.done:
+                self._queue.popleft()
+                self.sent += 1
+                self._queued_exposures -= last
         self._downstream += size
-        return b"".join(frames), len(frames)
+        return b"".join(frames), count
