@@ -15,7 +15,7 @@ in the region. Fields their flags declare meaningless are sent as 0.0 (never NaN
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -24,7 +24,7 @@ from eyehil.emulator.device.subject import Subject
 from eyehil.protocols.batch import FeaturesBatch
 from eyehil.protocols.enums import Eye, GlintFlags, PupilFlags
 
-PREPARE_S = 0.02  # features are prepared this far ahead (device seconds)
+PREPARE_S = 0.05  # features are prepared this far ahead (device seconds; `cli.ViewBlink.LEAD_US` is longer)
 
 
 @dataclass(frozen=True)
@@ -52,8 +52,12 @@ class Exposures:
 
     def __getitem__(self, s: slice) -> Exposures:
         """The exposures in slice `s` (the eye ids are shared)."""
-        per_sample = {f.name: getattr(self.batch, f.name)[s] for f in fields(self.batch) if f.name != "eye"}
-        return Exposures(replace(self.batch, **per_sample), self.time_us[s], self.values[s], self.blink[s])
+        b = self.batch
+        batch = FeaturesBatch(eye=b.eye, **{name: getattr(b, name)[s] for name in _PER_SAMPLE})
+        return Exposures(batch, self.time_us[s], self.values[s], self.blink[s])
+
+
+_PER_SAMPLE = tuple(f.name for f in fields(FeaturesBatch) if f.name != "eye")  # FeaturesBatch's arrays over samples
 
 
 def _inside(xy: np.ndarray, region: tuple[int, int, int, int]) -> np.ndarray:
@@ -105,15 +109,16 @@ class Camera:
         self._t0 = self._k = 0
         self._rate = 1
         self._sel = Selection(tracked, 1)
-        self._ready: Exposures | None = None
+        self._ready: Exposures | None = None  # prepared exposures, of which the first `_pos` are taken
+        self._pos = 0
 
     def start(self, t0_us: int, rate_hz: int, selection: Selection) -> None:
         """Begin exposing at `rate_hz` after `t0_us`."""
-        self._t0, self._rate, self._sel, self._k, self._ready = t0_us, rate_hz, selection, 0, None
+        self._t0, self._rate, self._sel, self._k, self._ready, self._pos = t0_us, rate_hz, selection, 0, None, 0
 
     def stop(self) -> None:
         """End the stream; prepared exposures are forgotten."""
-        self._ready = None
+        self._ready, self._pos = None, 0
 
     def time_of(self, k: int) -> int:
         """Mid-exposure time (us) of exposure `k` of this stream."""
@@ -135,30 +140,40 @@ class Camera:
 
     def take(self, count: int) -> Exposures:
         """The next `count` exposures, detected."""
-        while self._ready is None or len(self._ready) < count:
-            self._prepare(max(count - (0 if self._ready is None else len(self._ready)), 1))
-        out, self._ready = self._ready[:count], self._ready[count:]
+        while self._left < count:
+            self._prepare(count - self._left)
+        out = self._ready[self._pos:self._pos + count]
+        self._pos += count
         self._advance(count)
         return out
 
+    @property
+    def _left(self) -> int:
+        """Prepared exposures not yet taken."""
+        return 0 if self._ready is None else len(self._ready) - self._pos
+
     def skip(self, count: int) -> None:
         """Drop the next `count` exposures (a link too slow): they keep their frame ids, unsent."""
-        ready = 0 if self._ready is None else len(self._ready)
-        self._ready = None if count >= ready else self._ready[count:]
+        if count >= self._left:
+            self._ready, self._pos = None, 0
+        else:
+            self._pos += count
         self._advance(count)
 
     def invalidate(self, from_us: int) -> None:
         """Forget prepared exposures at or after `from_us`."""
         if self._ready is not None:
-            self._ready = self._ready[: int(np.searchsorted(self._ready.time_us, from_us))]
+            keep = self._pos + int(np.searchsorted(self._ready.time_us[self._pos:], from_us))
+            self._ready, self._pos = self._ready[self._pos:keep], 0
 
     def _advance(self, count: int) -> None:
         self._k += count
         self.frames_since_power_up += count
 
     def _prepare(self, at_least: int) -> None:
-        """Observe and detect the next block of exposures after those already prepared."""
-        have = 0 if self._ready is None else len(self._ready)
+        """Observe and detect the next block of exposures after those already prepared (at least `at_least`, and
+        `PREPARE_S` of them: each block costs about as much as one exposure)."""
+        have = self._left
         count = max(at_least, round(self._rate * PREPARE_S))
         k = np.arange(self._k + have, self._k + have + count)
         times = self._t0 + np.round((k + 1) * 1e6 / self._rate).astype(np.int64)
@@ -170,12 +185,12 @@ class Camera:
             glint_led=np.broadcast_to(np.arange(self._sel.leds), (count, len(self._sel.eyes), self._sel.leds)),
             **fields_)
         new = Exposures(batch, times, obs.values, obs.blink)
-        self._ready = new if self._ready is None else _concat(self._ready, new)
+        self._ready = new if not have else _concat(self._ready[self._pos:], new)
+        self._pos = 0
 
 
 def _concat(a: Exposures, b: Exposures) -> Exposures:
     """Exposures a then b (same eyes)."""
-    joined = {f.name: np.concatenate([getattr(a.batch, f.name), getattr(b.batch, f.name)])
-              for f in fields(a.batch) if f.name != "eye"}
-    return Exposures(replace(a.batch, **joined), *(np.concatenate([getattr(a, k), getattr(b, k)])
+    joined = {name: np.concatenate([getattr(a.batch, name), getattr(b.batch, name)]) for name in _PER_SAMPLE}
+    return Exposures(FeaturesBatch(eye=a.batch.eye, **joined), *(np.concatenate([getattr(a, k), getattr(b, k)])
                                                     for k in ("time_us", "values", "blink")))

@@ -143,7 +143,7 @@ class ViewBlink:
     view in this process can). The blink starts beyond the features the camera has already prepared
     (`camera.PREPARE_S`), so the runner's thread picks it up from the subject without being interrupted."""
 
-    LEAD_US = 40_000
+    LEAD_US = 80_000
 
     def __init__(self, core) -> None:
         self.core = core
