@@ -2,7 +2,9 @@
 
 `os.openpty` gives a master (the device's end) and a slave (the serial port the host opens); the slave
 is put in raw mode (`tty.setraw`: no echo, no line discipline, 8-bit clean) and kept open by the device
-for the link's lifetime, so the path stays valid while hosts come and go. The device cannot tell
+for the link's lifetime, so the path stays valid while hosts come and go. The master is blocking: the writer
+thread hands the kernel all queued output in one `write`, which returns when the host has taken it (the
+terminal holds about 12 kB); the reader reads it only when `select` says it is readable. The device cannot tell
 whether a host has the port open: output written while nobody reads fills the terminal's buffer, then
 the link's queue, and the device then drops samples (STATUS `samples_dropped`); a host should discard
 stale input when it opens the port (pyserial: `reset_input_buffer`). Baud rate and framing settings
@@ -11,6 +13,7 @@ are accepted and ignored, as on a USB CDC-ACM port.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import tty
 
@@ -24,7 +27,7 @@ class PtyLink(FdLink):
         """Open the pseudo-terminal pair."""
         self._master, self._slave = os.openpty()
         tty.setraw(self._slave)
-        os.set_blocking(self._master, False)
+        os.set_blocking(self._slave, False)  # the device's own end of the slave is read only to unblock a close
         self.url = os.ttyname(self._slave)
         self.name = f"pty {self.url}"
         super().__init__()
@@ -44,6 +47,16 @@ class PtyLink(FdLink):
             return
         if data:
             self._receive(data)
+
+    def _transmit(self, data: bytes) -> None:
+        view = memoryview(data)
+        while view:
+            view = view[os.write(self._master, view):]
+
+    def _unblock(self) -> None:
+        with contextlib.suppress(OSError):  # nothing to read (BlockingIOError): the writer is not stuck on it
+            while os.read(self._slave, CHUNK):
+                pass
 
     def _release(self) -> None:
         os.close(self._master)

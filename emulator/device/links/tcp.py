@@ -9,6 +9,7 @@ host is connected, output is discarded, as a UART transmits into the void; the d
 
 from __future__ import annotations
 
+import contextlib
 import socket
 
 from eyehil.emulator.device.links.fdlink import CHUNK, FdLink
@@ -41,8 +42,6 @@ class TcpLink(FdLink):
             return
         try:
             data = self._client.recv(CHUNK) if self._client else b""
-        except BlockingIOError:
-            return
         except OSError:
             data = b""
         if data:
@@ -55,19 +54,41 @@ class TcpLink(FdLink):
             client, _ = self._server.accept()
         except BlockingIOError:
             return
-        client.setblocking(False)
+        client.setblocking(True)  # the reader receives only when select says so; the writer's sendall blocks
         client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._disconnect()
         with self._lock:
             self._client = client
         self._reset()
 
+    def _transmit(self, data: bytes) -> None:
+        client = self._client
+        if client is None:
+            return
+        client.sendall(data)
+
+    def _send_now(self, data: bytes) -> int:
+        try:
+            return self._client.send(data, socket.MSG_DONTWAIT)
+        except BlockingIOError:
+            return 0
+        except OSError:  # the host went away: these bytes are lost
+            return len(data)
+
+    def _unblock(self) -> None:
+        client = self._client
+        if client is not None:
+            with contextlib.suppress(OSError):
+                client.shutdown(socket.SHUT_RDWR)
+
     def _disconnect(self) -> None:
-        """Forget the current host, if any."""
+        """Forget the current host, if any (a `sendall` to it in progress fails and its bytes are lost)."""
         with self._lock:
             client, self._client = self._client, None
             self._out.clear()
         if client is not None:
+            with contextlib.suppress(OSError):
+                client.shutdown(socket.SHUT_RDWR)
             client.close()
 
     def _release(self) -> None:
