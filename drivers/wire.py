@@ -2,7 +2,9 @@
 
 `Wire` owns one SerialLike (`eyehil.drivers.links`) and a `protocols.NativeReceiver`. `pump(wait_s)` reads
 whatever arrives within `wait_s` seconds (waiting with select() on the link's descriptor when it has
-one, else with the link's own read timeout), decodes it, and sorts it: FEATURES become `Sample`s in
+one, else with the link's own read timeout; a link that can be read without waiting, `read_now` or a pyserial
+posix port's descriptor, is drained up to `CHUNK` bytes between two selects, since a pseudo-terminal gives at
+most 4 kB a read), decodes it, and sorts it: FEATURES become `Sample`s in
 `samples`, FRAME_CHUNKs are reassembled (`eyehil.protocols.images.ImageAssembler`) into `ReceivedImage`s in
 `images`, every other message goes to `replies` with its arrival time. Faults are counted, never
 raised (`HostStats`); only a failing link raises (`LinkError`). A FEATURES or FRAME_CHUNK whose seq is not
@@ -14,9 +16,11 @@ reaches the application: it is dropped and counted (`duplicates_dropped`). Reass
 
 from __future__ import annotations
 
+import os
 import select
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, fields
 
 from eyehil.drivers.errors import LinkError
@@ -112,6 +116,27 @@ class HostStats:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
+def _reader(link) -> Callable[[int], bytes] | None:
+    """A read of `link` that never waits: its `read_now`, or a pyserial posix port's descriptor read directly."""
+    read_now = getattr(link, "read_now", None)
+    if read_now is not None:
+        return read_now
+    try:
+        from serial.serialposix import Serial as PosixSerial
+    except ImportError:  # not a posix system
+        return None
+    if type(link) is not PosixSerial:  # a subclass may read differently (and a fault or spy link wraps one)
+        return None
+
+    def read_fd(size: int) -> bytes:  # pyserial sets VMIN = VTIME = 0: b"" when nothing is there
+        try:
+            return os.read(link.fd, size)
+        except BlockingIOError:
+            return b""
+
+    return read_fd
+
+
 class Wire:
     """See the module docstring."""
 
@@ -129,6 +154,7 @@ class Wire:
         self._select = hasattr(link, "fileno")
         if self._select:
             link.timeout = 0
+        self._read_now = _reader(link) if self._select else None
 
     def send(self, message: Message) -> tuple[int, int]:
         """Encode and write `message`; return its (seq, host timestamp us)."""
@@ -152,6 +178,13 @@ class Wire:
         """Bytes arriving within `wait_s` (b"" if none)."""
         link = self.link
         try:
+            if self._read_now is not None:
+                data = self._drain()
+                if not data and wait_s > 0 and select.select([link.fileno()], [], [], wait_s)[0]:
+                    data = self._drain()
+                    if not data:
+                        raise LinkError("the link reported data and gave none: the device went away")
+                return data
             if self._select:
                 data = link.read(CHUNK)
                 if not data and wait_s > 0 and select.select([link.fileno()], [], [], wait_s)[0]:
@@ -172,6 +205,21 @@ class Wire:
             return data
         except OSError as exc:
             raise LinkError(f"read failed: {exc}") from exc
+
+    def _drain(self) -> bytes:
+        """What the link holds now, up to `CHUNK` bytes, read without waiting (if a later read fails, what came
+        before it is decoded first)."""
+        data = self._read_now(CHUNK)
+        while data and len(data) < CHUNK:
+            try:
+                more = self._read_now(CHUNK - len(data))
+            except OSError:
+                self._feed(data)
+                raise
+            if not more:
+                break
+            data += more
+        return data
 
     def pump(self, wait_s: float = 0.0) -> int:
         """Read and dispatch what arrives within `wait_s` s; return the number of bytes read."""

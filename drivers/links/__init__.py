@@ -16,6 +16,9 @@ qualify as they are)::
     close() -> None           release the link; idempotent
     optional:
     fileno() -> int           a descriptor select() can wait on (the client then reads with timeout 0)
+    read_now(size) -> bytes   up to `size` bytes already there, in one system call, never waiting (b"" if none);
+                              OSError when the link is gone. The client drains a link with it between two
+                              select()s; pyserial's posix ports qualify without it (their descriptor is read)
     in_waiting: int           bytes readable now (informative)
     reset_input_buffer()      discard bytes received but not read (used once, when a client opens)
 

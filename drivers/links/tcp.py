@@ -53,6 +53,16 @@ class TcpPort:
             out += chunk
         return bytes(out)
 
+    def read_now(self, size: int) -> bytes:
+        """Up to `size` bytes already received, without waiting (b"" if none); OSError if the peer closed."""
+        try:
+            chunk = self._sock.recv(size)
+        except BlockingIOError:
+            return b""
+        if not chunk:
+            raise ConnectionResetError("the device closed the connection")
+        return chunk
+
     def write(self, data: bytes) -> int:
         """Send everything; raise `TimeoutError` (an OSError) if the peer takes nothing for `write_timeout` s."""
         view = memoryview(bytes(data))

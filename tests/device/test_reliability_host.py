@@ -3,6 +3,7 @@ duplicates never delivered, fresh sessions. Scripted peers and explicit events; 
 
 from __future__ import annotations
 
+import os
 import socket
 import threading
 
@@ -246,3 +247,70 @@ def test_a_new_connection_finds_the_device_idle_and_configurable() -> None:
 
 def test_tracker_error_tree_covers_reply_mismatch() -> None:
     assert issubclass(TrackerTimeoutError, TrackerError)
+
+
+class DrainedThenGone:
+    """A link read without waiting (`read_now`): one frame's bytes, then the link fails."""
+
+    timeout = 0.0
+
+    def __init__(self, data: bytes) -> None:
+        self.data, self.reads = data, 0
+        self._r, self._w = os.pipe()
+
+    def fileno(self) -> int:
+        return self._r
+
+    def read_now(self, size: int) -> bytes:
+        self.reads += 1
+        if self.reads == 1:
+            return self.data
+        raise ConnectionResetError("gone")
+
+    def read(self, size: int = 1) -> bytes:
+        raise AssertionError("a link with read_now is drained with it")
+
+    def write(self, data: bytes) -> int:
+        return len(data)
+
+    def close(self) -> None:
+        os.close(self._r)
+        os.close(self._w)
+
+
+def test_a_drained_link_that_fails_after_a_frame_loses_nothing() -> None:
+    link = DrainedThenGone(encode(_features(9), 9, 0))
+    wire = Wire(link)
+    try:
+        with pytest.raises(LinkError):
+            wire.pump(0.01)
+        assert [s.seq for s in wire.samples] == [9] and link.reads == 2
+    finally:
+        link.close()
+
+
+def test_the_host_drains_raw_ports_without_waiting_and_reads_wrappers_through_their_read(tmp_path) -> None:
+    """pyserial's posix ports and the TCP port are read without a wait between reads; a wrapper (spy, faults) is read
+    through its own `read`, so it sees every byte."""
+    import serial
+
+    from eyehil.drivers.links.fault import FaultLink, FaultSpec
+    from eyehil.drivers.links.tcp import TcpPort
+    from eyehil.drivers.wire import _reader
+    from eyehil.emulator.device.links.pty import PtyLink
+
+    link = PtyLink()
+    link.attach(lambda data: None, lambda: None)
+    port = serial.Serial(link.url, timeout=0)
+    try:
+        link.send(b"\x01" * 50_000)
+        read = _reader(port)
+        got = b""
+        while len(got) < 50_000:
+            got += read(65536)
+        assert got == b"\x01" * 50_000 and read(65536) == b""
+        assert _reader(FaultLink(port, FaultSpec(drop=0.5))) is None
+    finally:
+        port.close()
+        link.close()
+    assert _reader(TcpPort.__new__(TcpPort)) is not None
