@@ -24,7 +24,8 @@ from eyehil.emulator.device.subject import Subject
 from eyehil.protocols.batch import FeaturesBatch
 from eyehil.protocols.enums import Eye, GlintFlags, PupilFlags
 
-PREPARE_S = 0.05  # features are prepared this far ahead (device seconds; `cli.ViewBlink.LEAD_US` is longer)
+PREPARE_S = 0.05  # features are prepared this far ahead (device seconds)
+FAST_PREPARE_S = 0.25  # the same on a fast clock, whose time waits for the subject's solves (fewer, larger blocks)
 
 
 @dataclass(frozen=True)
@@ -111,6 +112,7 @@ class Camera:
         self._sel = Selection(tracked, 1)
         self._ready: Exposures | None = None  # prepared exposures, of which the first `_pos` are taken
         self._pos = 0
+        self.prepare_s = PREPARE_S  # how far ahead exposures are prepared (device seconds)
 
     def start(self, t0_us: int, rate_hz: int, selection: Selection) -> None:
         """Begin exposing at `rate_hz` after `t0_us`."""
@@ -148,6 +150,13 @@ class Camera:
         return out
 
     @property
+    def prepared_until_us(self) -> int:
+        """Mid-exposure time (us) of the last exposure prepared (what the subject does until then is fixed); any
+        thread may read it."""
+        ready = self._ready
+        return int(ready.time_us[-1]) if ready is not None and len(ready) else self.time_of(self._k - 1)
+
+    @property
     def _left(self) -> int:
         """Prepared exposures not yet taken."""
         return 0 if self._ready is None else len(self._ready) - self._pos
@@ -172,9 +181,9 @@ class Camera:
 
     def _prepare(self, at_least: int) -> None:
         """Observe and detect the next block of exposures after those already prepared (at least `at_least`, and
-        `PREPARE_S` of them: each block costs about as much as one exposure)."""
+        `prepare_s` of them: each block costs about as much as one exposure)."""
         have = self._left
-        count = max(at_least, round(self._rate * PREPARE_S))
+        count = max(at_least, round(self._rate * self.prepare_s))
         k = np.arange(self._k + have, self._k + have + count)
         times = self._t0 + np.round((k + 1) * 1e6 / self._rate).astype(np.int64)
         obs = self.subject.observe(times)

@@ -141,16 +141,18 @@ def make_runner(opts: DeviceOptions, args: argparse.Namespace):
 class ViewBlink:
     """--view: lets the page close the simulated subject's eyes (the native protocol has no blink command, so only a
     view in this process can). The blink starts beyond the features the camera has already prepared
-    (`camera.PREPARE_S`), so the runner's thread picks it up from the subject without being interrupted."""
+    (`camera.Camera.prepared_until_us`), so the runner's thread picks it up from the subject without being
+    interrupted."""
 
-    LEAD_US = 80_000
+    LEAD_US = 40_000
 
     def __init__(self, core) -> None:
         self.core = core
 
     def blink(self, duration_s: float) -> bool:
         """Close the eyes for `duration_s` seconds, starting in `LEAD_US`; False if too many are pending."""
-        return self.core.subject.blink(self.core.clock.now_us() + self.LEAD_US, duration_s)
+        start = max(self.core.clock.now_us() + self.LEAD_US, self.core.camera.prepared_until_us + 1)
+        return self.core.subject.blink(start, duration_s)
 
 
 def _view_starter(args: argparse.Namespace):

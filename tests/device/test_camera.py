@@ -60,3 +60,27 @@ def test_invalidate_forgets_the_prepared_exposures_from_a_time_on() -> None:
     np.testing.assert_array_equal(again.values, reference.values[2:])
     camera.skip(10**6)  # more than prepared: nothing is left, the schedule moves on
     assert int(camera.take(1).batch.frame_id[0]) == 5 + 10**6
+
+
+def test_prepared_until_is_the_last_prepared_exposure_and_a_view_blink_starts_after_it() -> None:
+    from eyehil.emulator.device.build import build_device
+    from eyehil.emulator.device.cli import ViewBlink
+
+    camera = _camera()
+    assert camera.prepared_until_us == camera.time_of(-1)  # nothing prepared yet
+    taken = camera.take(1)
+    assert camera.prepared_until_us == camera.time_of(round(RATE_HZ * PREPARE_S) - 1) > int(taken.time_us[-1])
+    camera.skip(10**3)
+    assert camera.prepared_until_us == camera.time_of(camera.taken - 1)
+    core = build_device(DeviceOptions(clock="fast", rate_hz=RATE_HZ))
+    try:
+        core.camera.start(0, RATE_HZ, Selection((Eye.RIGHT,), 2))
+        core.camera.take(1)  # a fast clock prepares FAST_PREPARE_S ahead, beyond the view's own lead
+        horizon = core.camera.prepared_until_us
+        assert horizon > core.clock.now_us() + ViewBlink.LEAD_US
+        assert ViewBlink(core).blink(0.2)
+        times = np.arange(0, horizon + 400_000, 1000)
+        closed = times[core.subject.observe(times).blink]
+        assert len(closed) and closed[0] > horizon  # what the camera had prepared stays open-eyed
+    finally:
+        core.close()
