@@ -75,6 +75,21 @@ class FrameDecoder:
         """Bytes buffered for the frame in progress."""
         return len(self._buf)
 
+    @property
+    def between_frames(self) -> bool:
+        """No frame is in progress (nothing buffered, not skipping an oversized one): the next byte starts one."""
+        return not self._buf and not self._skipping
+
+    def hand_over(self, data: bytes, first: int) -> bytes | None:
+        """The frame in progress completed by `data`, whose first delimiter is at `first`: the bytes buffered for it
+        and `data`, the buffer emptied (decoding the first run of what is returned is what `feed` would do with it);
+        or None (nothing changed) if it is being skipped or would grow past `max_encoded`, which `feed` reports."""
+        if self._skipping or len(self._buf) + first > self.max_encoded:
+            return None
+        joined = bytes(self._buf) + data
+        self._buf.clear()
+        return joined
+
     def reset(self) -> None:
         """Forget the frame in progress (counters are kept)."""
         self._buf.clear()

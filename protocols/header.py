@@ -103,7 +103,7 @@ def _pack_header(msg_type: int, seq: int, timestamp_us: int, payload: bytes, ver
 _TYPES: dict[int, MessageType] = {int(t): t for t in MessageType}
 
 
-def _known_type(number: int) -> int:
+def known_type(number: int) -> int:
     """Return the `MessageType` member for `number`, or `number` itself if unknown."""
     return _TYPES.get(number, number)
 
@@ -128,7 +128,7 @@ def unpack_frame(frame: bytes, versions: frozenset[int] = SUPPORTED_VERSIONS) ->
     actual = len(frame) - MIN_FRAME_SIZE
     if payload_len != actual:
         raise BadLengthError(f"payload_len {payload_len}, frame holds {actual} bytes", seq, number)
-    header = Header(version, _known_type(number), seq, timestamp_us, payload_len)
+    header = Header(version, known_type(number), seq, timestamp_us, payload_len)
     return header, bytes(frame[HEADER_SIZE : HEADER_SIZE + payload_len])
 
 

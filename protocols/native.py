@@ -53,11 +53,16 @@ def decode(
     `UnknownMessageTypeError`. Payload errors raise `MalformedPayloadError` with the frame's seq and type.
     """
     header, payload = unpack_frame(frame, versions)
+    return header, decode_payload(header, payload, accept)
+
+
+def decode_payload(header: Header, payload: bytes, accept: frozenset[MessageType] | None = None) -> Message:
+    """The message of a checked frame's `header` and `payload` (the second step of `decode`, with its errors)."""
     cls = MESSAGE_CLASSES.get(header.msg_type)  # type: ignore[call-overload]
     if cls is None or (accept is not None and header.msg_type not in accept):
         raise UnknownMessageTypeError(f"message type 0x{header.msg_type:02X}", header.seq, header.msg_type)
     try:
-        return header, cls.from_payload(payload)
+        return cls.from_payload(payload)
     except ValueError as exc:
         raise MalformedPayloadError(f"{cls.TYPE.name}: {exc}", header.seq, header.msg_type) from exc
 

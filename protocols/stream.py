@@ -7,13 +7,17 @@ CRC and magic were good, so a refused command still counts as received in sequen
 not newer than the last one is flagged (`Received.out_of_order`): a duplicate or a late frame (at most
 `REORDER_WINDOW` behind) leaves the baseline where it was, so that the frames after it are not counted
 lost twice; one farther behind is a restarted sender and becomes the new baseline.
-Still pure: no I/O, no clock, no threads.
+Still pure: no I/O, no clock, no threads. Where the compiled kernels can be had, the frames that lie whole in
+one `feed` are COBS-decoded and checked in one call (`eyehil.protocols.kernels.decode_frames`) and only the
+message is built in Python; a frame the kernel does not pass takes the per-frame path, which reports it, so the
+events and counters are the same either way (tests/test_protocol_stream.py).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+from eyehil.protocols import kernels
 from eyehil.protocols.errors import (
     BadMagicError,
     CrcError,
@@ -24,8 +28,8 @@ from eyehil.protocols.errors import (
     UnsupportedVersionError,
 )
 from eyehil.protocols.framing import MAX_FRAME_SIZE, FaultKind, FrameDecoder, FramingFault
-from eyehil.protocols.header import SUPPORTED_VERSIONS, Header, MessageType, seq_gap
-from eyehil.protocols.native import Message, decode, error_reply_for
+from eyehil.protocols.header import HEADER_SIZE, SUPPORTED_VERSIONS, Header, MessageType, known_type, seq_gap
+from eyehil.protocols.native import Message, decode, decode_payload, error_reply_for
 from eyehil.protocols.replies import ErrorReply
 
 
@@ -109,10 +113,46 @@ class NativeReceiver:
         self.framer = FrameDecoder(max_frame)
         self.sequence = SequenceTracker()
         self.counters = LinkCounters()
+        self._buffers = kernels.FrameBuffers() if kernels.AVAILABLE else None
 
     def feed(self, data: bytes | bytearray | memoryview) -> list[Received | Rejected]:
         """Consume bytes; return the messages and faults they completed, in stream order."""
-        return [self._event(item) for item in self.framer.feed(data)]
+        view = bytes(data)
+        last = view.rfind(0)
+        if last < 0 or not kernels.AVAILABLE:  # no delimiter: the frame in progress only grows
+            return [self._event(item) for item in self.framer.feed(view)]
+        events: list[Received | Rejected] = []
+        if not self.framer.between_frames:  # the frame in progress ends at the first delimiter
+            first = view.find(0)
+            joined = self.framer.hand_over(view, first)
+            if joined is None:
+                events += [self._event(item) for item in self.framer.feed(view[: first + 1])]
+                view, last = view[first + 1 :], last - first - 1
+            else:
+                view, last = joined, last + len(joined) - len(view)
+        if last >= 0:
+            self._whole(view[: last + 1], events)
+        events += [self._event(item) for item in self.framer.feed(view[last + 1 :])]
+        return events
+
+    def _whole(self, data: bytes, events: list[Received | Rejected]) -> None:
+        """The frames `data` holds whole (it starts between frames and ends at a delimiter), checked in one compiled
+        call; a frame it does not pass, or whose version this side does not take, goes through the framer and
+        `_event` as if fed alone, which report it."""
+        decoded, records = kernels.decode_frames(data, self.framer.max_encoded, self.framer.max_frame, self._buffers)
+        for start, length, offset, _, verdict, version, number, seq, timestamp_us, payload_len in records:
+            if verdict or version not in self.versions:
+                events += [self._event(item) for item in self.framer.feed(data[start : start + length + 1])]
+                continue
+            self.framer.frames += 1
+            header = Header(version, known_type(number), seq, timestamp_us & 0xFFFFFFFFFFFFFFFF, payload_len)
+            body = offset + HEADER_SIZE
+            try:
+                message = decode_payload(header, decoded[body : body + payload_len].tobytes(), self.accept)
+            except ProtocolError as exc:
+                events.append(self._rejected(exc))
+                continue
+            events.append(self._received(header, message))
 
     def _event(self, item: bytes | FramingFault) -> Received | Rejected:
         """Turn one framing event into a `Received` or a `Rejected`, counting it."""
@@ -124,6 +164,10 @@ class NativeReceiver:
             header, message = decode(item, self.accept, self.versions)
         except ProtocolError as exc:
             return self._rejected(exc)
+        return self._received(header, message)
+
+    def _received(self, header: Header, message: Message) -> Received:
+        """Count a decoded message and place it in the sequence."""
         self.counters.rx_frames += 1
         lost = self._track(header.seq)
         return Received(header, message, max(lost, 0), lost < 0)

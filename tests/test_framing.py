@@ -376,3 +376,27 @@ def test_whole_frames_in_one_feed_give_the_events_of_the_buffered_path() -> None
             cut = _feed_in_pieces(fast, stream, np.random.default_rng(trial))
             assert cut == _feed_in_pieces(buffered, stream, np.random.default_rng(trial))
             assert _counters(fast) == _counters(buffered) and cut[-1] == b"last"
+
+
+@NO_KERNELS
+@settings(max_examples=200, deadline=None)
+@given(size=st.integers(0, 20_000), value=st.integers(0, 0xFFFF), seed=st.integers(0, 2**32 - 1),
+       cut=st.integers(0, 20_000))
+def test_long_crcs_match_binascii_property(size: int, value: int, seed: int, cut: int) -> None:
+    """From 64 bytes on the kernel folds blocks (`kernels.FOLDING`, where the processor multiplies carry-less): every
+    length (whole 64-byte groups, 16-byte blocks and a tail), any starting register, continued at any cut."""
+    data = np.random.default_rng(seed).integers(0, 256, size, dtype=np.uint8).tobytes()
+    cut = min(cut, size)
+    assert kernels.crc16(data, value) == binascii.crc_hqx(data, value)
+    assert kernels.crc16(data[cut:], kernels.crc16(data[:cut], value)) == binascii.crc_hqx(data, value)
+
+
+@NO_KERNELS
+def test_crc_of_structured_data_over_the_folding_sizes() -> None:
+    """Zeros, ones and patterns (carries and reductions the random data may miss), at the lengths around each
+    block boundary of the folding."""
+    for n in [63, 64, 65, 79, 80, 127, 128, 129, 191, 192, 255, 256, 257, 4114, 4116, 65536]:
+        for data in (bytes(n), b"\xff" * n, bytes(range(256)) * (n // 256) + bytes(range(n % 256)),
+                     (b"\x80" + bytes(15)) * (n // 16) + b"\x01" * (n % 16)):
+            for value in (0, 0xFFFF, 0x8000, 0x0001):
+                assert kernels.crc16(data, value) == binascii.crc_hqx(data, value), (n, value)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+from dataclasses import asdict
 
 import numpy as np
 import pytest
@@ -29,6 +30,7 @@ from eyehil.protocols import (
     default_configure,
     encode,
     encode_frame,
+    kernels,
 )
 from eyehil.protocols.header import MessageType, pack_frame
 
@@ -166,3 +168,72 @@ def test_default_configure_is_acceptable() -> None:
     cfg = default_configure(INFO)
     assert cfg == Configure(2, 250, EyeSelect.BOTH, StreamSelect.FEATURES)
     assert check_configure(cfg, INFO) is None
+
+
+def _events_and_counters(receiver: NativeReceiver, pieces: list[bytes]) -> tuple[list, dict, tuple]:
+    """Everything a receiver reports for `pieces` fed in turn: events (as comparable tuples), counters, framer's."""
+    out = []
+    for piece in pieces:
+        for e in receiver.feed(piece):
+            if isinstance(e, Received):
+                out.append(("received", e.header, e.message, e.lost_before, e.out_of_order))
+            else:
+                out.append(("rejected", type(e.error).__name__, str(e.error), e.reply))
+    f = receiver.framer
+    return out, asdict(receiver.counters), (f.frames, f.cobs_errors, f.oversized, f.bytes_discarded, f.pending)
+
+
+def _hostile_stream(rng: np.random.Generator) -> bytes:
+    """Valid frames of every size among corrupted ones: flipped bytes (CRC), bad COBS, runs over the limit,
+    an unknown type, another version, a bad payload length, empty runs, garbage without delimiters."""
+    from eyehil.protocols import FrameChunk
+    from eyehil.protocols.enums import Eye
+
+    parts: list[bytes] = []
+    seq = int(rng.integers(0, 2**32))
+    for _ in range(int(rng.integers(5, 40))):
+        kind = int(rng.integers(0, 12))
+        size = int(rng.integers(0, 4075))
+        chunk = FrameChunk(3, Eye.RIGHT, 1, 100, 60, 0, 0, 0, 2, 0, rng.integers(0, 256, min(size, 4074),
+                                                                                   dtype=np.uint8).tobytes())
+        frame = encode(chunk if kind % 2 else COMMANDS[kind % 4], seq, int(rng.integers(0, 2**63)))
+        seq += int(rng.integers(1, 3))
+        if kind == 2:  # a flipped byte
+            i = int(rng.integers(1, len(frame) - 1))
+            frame = frame[:i] + bytes([frame[i] ^ 0x5A or 1]) + frame[i + 1 :]
+        elif kind == 3:  # bad COBS: a code byte that runs past the end
+            frame = b"\xfe\x01\x02\x00"
+        elif kind == 4:  # a run longer than any frame
+            frame = rng.integers(1, 256, 5000, dtype=np.uint8).tobytes() + b"\x00"
+        elif kind == 5:  # another version, an unknown type, a wrong length: good CRC and COBS
+            raw = bytearray(pack_frame(0x90 + int(rng.integers(0, 3)), seq, 1, b"abc", version=2))
+            frame = encode_frame(bytes(raw))
+        elif kind == 6:
+            frame = encode_frame(pack_frame(0x7E, seq, 1, b""))
+        elif kind == 7:
+            frame = b"\x00\x00" + frame
+        elif kind == 8:
+            frame = rng.integers(1, 256, int(rng.integers(1, 50)), dtype=np.uint8).tobytes() + frame
+        parts.append(frame)
+    return b"".join(parts)
+
+
+@pytest.mark.skipif(not kernels.AVAILABLE, reason=f"compiled kernels unavailable: {kernels.REASON}")
+@pytest.mark.parametrize("seed", range(40))
+def test_the_batched_path_reports_what_the_per_frame_path_does(seed: int, monkeypatch) -> None:
+    """A hostile stream cut at random places (single bytes, a frame's worth, 64 kB reads): the receiver that checks
+    whole frames in one compiled call gives the per-frame path's events, counters and framer state, in order."""
+    rng = np.random.default_rng(seed)
+    stream = _hostile_stream(rng)
+    cuts = np.sort(rng.choice(np.arange(1, len(stream)), size=min(len(stream) - 1, int(rng.integers(0, 30))),
+                              replace=False))
+    pieces = [stream[a:b] for a, b in itertools.pairwise([0, *cuts.tolist(), len(stream)])]
+    kinds = set()
+    for accept in (None, HOST_TYPES):
+        fast = _events_and_counters(NativeReceiver(accept=accept), pieces)
+        with monkeypatch.context() as patch:
+            patch.setattr(kernels, "AVAILABLE", False)
+            slow = _events_and_counters(NativeReceiver(accept=accept), pieces)
+        assert fast == slow
+        kinds |= {e[0] for e in fast[0]}
+    assert kinds == {"received", "rejected"}  # the stream had both
