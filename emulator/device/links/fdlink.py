@@ -4,11 +4,12 @@ The reader selects on the link's readable descriptors and a wake-up pipe and han
 runner. `send` writes at once what the descriptor takes without waiting (`_send_now`, where the link can; the
 common case on TCP: one system call on the runner's thread, no thread hop), queues the rest (at most
 `MAX_LINK_BACKLOG` bytes; beyond, output is dropped and counted, ``bytes_dropped``; the device's own limits
-normally keep far below it) and wakes the writer, which takes everything queued and writes it with one blocking
-call (`_transmit`). The interpreter lock is released for
-the whole of that call, however many times the kernel waits for the host to read: a pseudo-terminal holds
-only about 12 kB, so a non-blocking writer woke, and waited for the lock, some twenty times per 320 x 240
-image. `backlog` counts the bytes queued and those the writer is writing.
+normally keep far below it) and wakes the writer, which takes up to `WRITE_PIECE` bytes of the queue at a time and
+writes each piece with one blocking call (`_transmit`). The interpreter lock is released for the whole of that call,
+however many times the kernel waits for the host to read: a pseudo-terminal holds only about 12 kB, so a
+non-blocking writer woke, and waited for the lock, some twenty times per 320 x 240 image. `backlog` counts the bytes
+queued and those of the piece being written (so it falls piece by piece as the host reads, and the device's own
+limits, which keep FEATURES ahead of images, see the link drain).
 
 Subclasses fill five hooks: `_read_fds`, `_write_fd` (None while no host is attached: output is discarded),
 `_readable(fd)`, `_transmit(data)` (a blocking write of all of `data` to the current host; OSError if it is
@@ -28,6 +29,7 @@ from eyehil.emulator.device.links.base import register_open, unregister
 
 CHUNK = 65536
 MAX_LINK_BACKLOG = 4 * 1024 * 1024  # bytes queued for a host that does not read
+WRITE_PIECE = 32 * 1024  # bytes the writer hands the kernel in one blocking call
 UNBLOCK_POLL_S = 0.01  # closing: how often `_unblock` is tried again while the writer is still in `_transmit`
 
 
@@ -95,7 +97,8 @@ class FdLink:
             thread.start()
 
     def send(self, data: bytes) -> None:
-        """Queue `data` for the writer; discard it if no host is attached or the queue is full (counted)."""
+        """Write what the host takes at once (`_send_now`, when nothing waits before it), queue the rest for the writer;
+        discard it if no host is attached, or what does not fit the queue (counted in `bytes_dropped`)."""
         if not data:
             return
         with self._lock:
@@ -141,11 +144,6 @@ class FdLink:
         with contextlib.suppress(OSError):  # the pipe is full: the thread is awake anyway
             os.write(self._wake_w, b"x")
 
-    def _drop_output(self) -> None:
-        """Forget queued output (the host went away)."""
-        with self._lock:
-            self._out.clear()
-
     def _read_loop(self) -> None:
         while not self._closing:
             readable, _, _ = select.select([self._wake_r, *self._read_fds()], [], [], 1.0)
@@ -162,8 +160,8 @@ class FdLink:
                     self._queued.wait()
                 if self._closing:
                     return
-                data = bytes(self._out)
-                self._out.clear()
+                data = bytes(self._out[:WRITE_PIECE])
+                del self._out[:WRITE_PIECE]
                 self._writing = len(data)
             try:
                 self._transmit(data)
