@@ -4,8 +4,9 @@
 
 Configures the Pupil Core eye tracker in gaze mode (``pupillometry_only`` off: it subscribes to ``gaze.3d.``
 and ``surfaces.SURFACE``) on Pupil Remote at 127.0.0.1:PORT, runs ``runSetupProcedure`` (Pupil Capture's
-calibration: ``C`` and the calibration notifications) and prints ``CALIBRATION <result code>`` and the
-ioHub constant it should equal (``OK <EYETRACKER_OK>``), then ``READY`` and waits for a line on stdin (the
+calibration: ``C`` and the calibration notifications) and prints ``CALIBRATION <result code>`` (again after a
+setup the client aborted, ``aborted`` after the code) and the ioHub constant it should equal (``OK
+<EYETRACKER_OK>``), then ``READY`` and waits for a line on stdin (the
 test shows the subject a target meanwhile), records for SECONDS and prints one ``SAMPLE <json>`` line per
 sample event with its gaze in screen fractions (top-left origin; converted back from ioHub's display
 coordinates; ``time`` is the event's device_time, the gaze datum's Pupil time in s), then ``DONE``.
@@ -16,9 +17,18 @@ import sys
 from iohub_launch import session  # beside this script
 from psychopy.iohub.constants import EyeTrackerConstants
 
+RETRIES = 2  # setups calibrated again after the client reported an abort (the race in test_iohub_pupil.py)
+
 
 def calibrate(tracker) -> None:
-    print(f"CALIBRATION {tracker.runSetupProcedure()}", flush=True)
+    """``CALIBRATION <result>`` for each setup (`runSetupProcedure` again after an abort, at most `RETRIES` times;
+    such a line ends in ``aborted``), then ``OK <EYETRACKER_OK>``."""
+    aborted = EyeTrackerConstants.EYETRACKER_SETUP_ABORTED
+    for _ in range(1 + RETRIES):
+        result = tracker.runSetupProcedure()
+        print(f"CALIBRATION {result}{' aborted' if result == aborted else ''}", flush=True)
+        if result != aborted:
+            break
     print(f"OK {EyeTrackerConstants.EYETRACKER_OK}", flush=True)
 
 
