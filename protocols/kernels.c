@@ -284,7 +284,7 @@ size_t eyehil_chunk_frames(const uint8_t *image, size_t size, const uint8_t *hea
     memcpy(frame + HEADER_SIZE, head, CHUNK_HEAD);
     for (; k < count && (long)used < room; k++) {
         size_t offset = (size_t)k * chunk_data;
-        if (offset >= size)
+        if (offset > size || (offset == size && size != 0)) /* an empty image is one empty chunk */
             return *released = 0, 0;
         size_t len = size - offset < chunk_data ? size - offset : chunk_data;
         size_t n = HEADER_SIZE + CHUNK_HEAD + len;

@@ -203,6 +203,9 @@ def test_image_chunks_send_nothing_without_room_and_refuse_what_split_image_refu
     data, n = chunks.wire(0, 0, 10**9)
     assert n == chunks.count == 19 and chunks.done and chunks.wire(19, 0, 10**9) == (b"", 0)
     assert [decode_wire(f + b"\x00")[0].seq for f in data.split(b"\x00")[:-1]] == list(range(19))
+    for empty in (np.zeros((0, 5), np.uint8), np.zeros((3, 0), "<u2")):  # one chunk without pixels, as split_image
+        reference = encode(split_image(4, Eye.LEFT, empty)[0], 9, 1)
+        assert ImageChunks(4, Eye.LEFT, empty).wire(9, 1, 1) == (reference, 1)
     for bad in (np.zeros((2, 2, 2), np.uint8), np.zeros((2, 2), np.float32)):
         with pytest.raises(ValueError):
             ImageChunks(1, Eye.RIGHT, bad)
