@@ -80,6 +80,8 @@ class ImageChunks:
         """The wire bytes of the next chunks, numbered from `seq` (mod 2^32), stamped `timestamp_us`, added while
         fewer than `room` bytes were written (none if `room` <= 0); and how many chunks they hold."""
         first = self.sent
+        if not 0 <= timestamp_us < 1 << 64:
+            raise ValueError(f"header field out of range: timestamp {timestamp_us} us")
         if kernels.AVAILABLE:
             data, n = kernels.chunk_frames(self._raw, self._head, first, self.count, self._chunk_data, seq,
                                            timestamp_us, PROTOCOL_VERSION, MessageType.FRAME_CHUNK, room)

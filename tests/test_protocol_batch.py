@@ -213,3 +213,6 @@ def test_image_chunks_send_nothing_without_room_and_refuse_what_split_image_refu
         ImageChunks(1, Eye.RIGHT, image, chunk_data=MAX_CHUNK_DATA + 1)
     with pytest.raises(ValueError):
         ImageChunks(1, Eye.RIGHT, image, roi_xy=(70_000, 0))
+    for timestamp in (-1, 1 << 64):  # what the header cannot carry, on either path
+        with pytest.raises(ValueError, match="out of range"):
+            ImageChunks(1, Eye.RIGHT, image).wire(0, timestamp, 10)
