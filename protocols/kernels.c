@@ -59,7 +59,7 @@ static uint16_t crc16_tables(const uint8_t *data, size_t len, uint16_t crc)
  * what is folded so far is congruent, mod the CRC's polynomial P = x^16 + x^12 + x^5 + 1, to H (x^(d+64) mod P) +
  * L (x^d mod P), a product of at most 80 bits. Four accumulators run 64 bytes apart, then fold into one, whose 16
  * bytes the table finishes (from a zero register, which multiplies by x^16 and reduces mod P), then the tail. */
-static uint64_t fold_k[6]; /* x^d mod P for d = 576, 512 (four accumulators), 192, 128 (one), set at load */
+static uint64_t fold_k[4]; /* x^d mod P for d = 576, 512 (four accumulators), 192, 128 (one), set at load */
 
 static uint64_t xpow_mod(unsigned d) /* x^d mod P, bit by bit */
 {
@@ -133,9 +133,8 @@ uint16_t eyehil_crc16(const uint8_t *data, size_t len, uint16_t crc)
     return crc16_tables(data, len, crc);
 }
 
-/* Which CRC path `eyehil_crc16` takes for long inputs: 1 folding, 0 tables; `eyehil_crc16_tables` is the other. */
+/* Which CRC path `eyehil_crc16` takes for long inputs: 1 folding, 0 tables. */
 int eyehil_crc16_folding(void) { return folding; }
-uint16_t eyehil_crc16_tables(const uint8_t *data, size_t len, uint16_t crc) { return crc16_tables(data, len, crc); }
 
 /* COBS-encode src[0..n) into dst (room for n + n / 254 + 1 bytes); returns the encoded length. Blocks end at a
  * zero or after 254 data bytes; no empty block follows a final run of whole 254-byte blocks. */
@@ -239,18 +238,23 @@ size_t eyehil_decode_frames(const uint8_t *src, size_t n, size_t max_encoded, si
 /* The wire bytes of the frame whose header and payload are raw[0..n): COBS of raw followed by its CRC-16 (low
  * byte first), then the 0x00 delimiter, into dst (room for n + 2 + (n + 2) / 254 + 2 bytes). Returns their
  * length, or 0 if the frame would exceed MAX_FRAME bytes. */
+static size_t seal(uint8_t *frame, size_t n, uint8_t *dst) /* frame[0..n) + room for its CRC: the wire bytes */
+{
+    uint16_t crc = eyehil_crc16(frame, n, 0xFFFFu);
+    frame[n] = (uint8_t)(crc & 0xFFu);
+    frame[n + 1] = (uint8_t)(crc >> 8);
+    size_t len = eyehil_cobs_encode(frame, n + 2, dst);
+    dst[len] = 0;
+    return len + 1;
+}
+
 size_t eyehil_frame_encode(const uint8_t *raw, size_t n, uint8_t *dst)
 {
     uint8_t frame[MAX_FRAME];
     if (n > MAX_FRAME - 2)
         return 0;
     memcpy(frame, raw, n);
-    uint16_t crc = eyehil_crc16(raw, n, 0xFFFFu);
-    frame[n] = (uint8_t)(crc & 0xFFu);
-    frame[n + 1] = (uint8_t)(crc >> 8);
-    size_t len = eyehil_cobs_encode(frame, n + 2, dst);
-    dst[len] = 0;
-    return len + 1;
+    return seal(frame, n, dst);
 }
 
 static void put16(uint8_t *p, uint32_t v) { p[0] = (uint8_t)v; p[1] = (uint8_t)(v >> 8); }
@@ -295,11 +299,7 @@ size_t eyehil_chunk_frames(const uint8_t *image, size_t size, const uint8_t *hea
         put16(frame + HEADER_SIZE + 14, k);
         put32(frame + HEADER_SIZE + 18, (uint32_t)offset);
         memcpy(frame + HEADER_SIZE + CHUNK_HEAD, image + offset, len);
-        uint16_t crc = eyehil_crc16(frame, n, 0xFFFFu);
-        frame[n] = (uint8_t)(crc & 0xFFu);
-        frame[n + 1] = (uint8_t)(crc >> 8);
-        used += eyehil_cobs_encode(frame, n + 2, dst + used);
-        dst[used++] = 0;
+        used += seal(frame, n, dst + used);
     }
     *released = k - first;
     return used;
