@@ -21,7 +21,7 @@ import select
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 from eyehil.drivers.errors import LinkError
 from eyehil.protocols.header import SEQ_MODULUS, Header, seq_gap
@@ -46,7 +46,8 @@ class Sample:
     """One FEATURES message as received: device time (mid-exposure) and host arrival time, us.
 
     `lost_before`: link frames lost just before it (sequence gap); `skipped_before`: camera exposures
-    missing just before it (frame_id gap: lost on the link, or never sent by the device).
+    missing just before it (frame_id gap: lost on the link, never sent by the device, or discarded unread when
+    the host's buffer was full, whose gaps the next sample inherits).
     """
 
     seq: int
@@ -254,12 +255,20 @@ class Wire:
         self._last_frame_id = message.frame_id
         self.stats.skipped_exposures += skipped
         self.stats.samples += 1
-        if len(self.samples) >= MAX_BUFFERED_SAMPLES:
-            self.samples.popleft()
-            self.stats.samples_overflowed += 1
         h = event.header
         self.samples.append(Sample(h.seq, message.frame_id, h.timestamp_us, now, message.eyes, event.lost_before,
                                    skipped))
+        if len(self.samples) > MAX_BUFFERED_SAMPLES:
+            self._overflow()
+
+    def _overflow(self) -> None:
+        """Discard the oldest unread sample; the next one inherits its gaps, plus its own exposure, so what the
+        application reads still marks every gap (`skipped_before` equals the frame_id gap)."""
+        dropped = self.samples.popleft()
+        self.stats.samples_overflowed += 1
+        head = self.samples[0]  # there is one: the sample just appended at least
+        self.samples[0] = replace(head, lost_before=head.lost_before + dropped.lost_before,
+                                  skipped_before=head.skipped_before + dropped.skipped_before + 1)
 
     def _chunk(self, chunk: FrameChunk, header: Header, now: int) -> None:
         """Add a chunk to its image; keep the image when it is whole."""

@@ -145,6 +145,23 @@ def test_duplicated_and_reordered_samples_are_dropped_and_loss_is_exact() -> Non
     assert wire.stats.lost_frames == 100 - len(ids) == 2  # 20 (late) and 50
 
 
+def test_samples_nobody_read_are_discarded_and_the_next_one_marks_the_gap(monkeypatch) -> None:
+    """A full sample buffer discards its oldest; the sample left first carries their gaps (frame ids, link losses),
+    so a recording of what the application read still marks every gap."""
+    monkeypatch.setattr("eyehil.drivers.wire.MAX_BUFFERED_SAMPLES", 5)
+    seqs = [s for s in range(30) if s not in (3, 4, 12)]  # 3, 4 and 12 lost on the link
+    wire = Wire(ScriptedDevice(_honest, preload=b"".join(encode(_features(s), s, s) for s in seqs)))
+    while wire.pump(0):
+        pass
+    got = list(wire.samples)
+    assert [s.frame_id for s in got] == [25, 26, 27, 28, 29]
+    assert wire.stats.samples_overflowed == len(seqs) - 5
+    first = got[0]
+    assert first.skipped_before == 25  # frames 0-24: the reader saw none of them
+    assert first.lost_before == 3  # 3, 4 and 12: the link's losses before it are not forgotten
+    assert all(s.skipped_before == 0 and s.lost_before == 0 for s in got[1:])
+
+
 class FailsAfterOneByte:
     """A link whose waiting read returns one byte and whose next read fails (a disconnect mid-read)."""
 
