@@ -5,8 +5,8 @@ overrides the eyes), the eye anatomy (an `eyehil.emulator.eye.select` spec and a
 pose, the behaviour, the script (`"stimulus"`: follow the host's STIMULUS messages; `"demo"`: loop over
 the scene's targets with saccades, a pursuit and blinks), the mode (native or ISCAN), the default rate
 and the clock. A native device also streams frames (`frame_stream`): its subject's solver carries the
-appearance channels (`appearance.AppearanceSolver`), and the image noise comes from generators seeded
-with `seed`, the frame id and the eye (`frames.exposure_rng`).
+appearance channels (`appearance.AppearanceSolver`), and the image noise is a function of
+`seed`, the frame id and the eye (`frames.exposure_noise`).
 
 URL form (loop://, and `--option` values): ``scene=blignaut2014&eyes=published&eye=3&clock=fast&rate=500``.
 ``link_rate=usb-fs`` paces a native link (pty, tcp, usbip) to a real link's byte rate (`links.paced`);

@@ -1,7 +1,7 @@
 """The device's image stream: which exposures become FRAME_CHUNKs, and when their chunks go out.
 
 Images (docs/protocol.md sections 5.3 and 7, FRAME_CHUNK), rendered by `frames` from the exposure's
-observation (`camera.Exposures.values`) with the generator `frames.exposure_rng(seed, frame_id, eye)`:
+observation (`camera.Exposures.values`) with the noise `frames.exposure_noise(seed, frame_id, eye)`:
 
 - no region of interest (the full-sensor code): one crop per selected eye (eye RIGHT / LEFT) of
   `FrameOptions.crop_px` (320 x 240, clipped to the sensor), centred on that eye's pupil and kept on the

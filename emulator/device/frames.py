@@ -7,16 +7,16 @@ The stable entry point is
 with `renderer = ExposureRenderer.for_subject(subject)` (the subject's solver must be an
 `appearance.AppearanceSolver`: `build.build_subject` makes one), `values` one row (E, C) of
 `Subject.observe(times).values` (E eyes in the scene's `sides` order), `eye_index` the eye to draw and `rng`
-the noise generator. It returns a `render.renderer.Frame`: an 8-bit image of `size` (w, h) px (clipped to
-the sensor) whose top-left pixel is sensor pixel `frame.roi_xy`, centred on that eye's pupil (or on
-`centre_px`, full-sensor px; the sensor's centre when neither is known) and kept on the sensor, with its
-ground truth (`frame.truth`, full-sensor px). `render_region` draws several eyes into one fixed window
+the noise (`exposure_noise`, or any numpy generator). It returns a `render.renderer.Frame`: an 8-bit image of
+`size` (w, h) px (clipped to the sensor) whose top-left pixel is sensor pixel `frame.roi_xy`, centred on that
+eye's pupil (or on `centre_px`, full-sensor px; the sensor's centre when neither is known) and kept on the
+sensor, with its ground truth (`frame.truth`, full-sensor px). `render_region` draws several eyes into one fixed window
 (a region of interest, or the full sensor).
 
 A row of NaN (the subject is blinking) draws skin only; `appearance.closed(row, layout)` gives the same
-eye with its lids shut, which the device draws during blinks (`frame_stream`). `exposure_rng(seed,
-frame_id, eye)` is the generator the device uses for one image: the same seed, frame id and eye give the
-same pixels, whatever else was rendered or dropped before.
+eye with its lids shut, which the device draws during blinks (`frame_stream`). `exposure_noise(seed,
+frame_id, eye)` is the noise the device uses for one image (`eyehil.emulator.render.noise.CounterNoise`): the same
+seed, frame id and eye give the same pixels, whatever else was rendered or dropped before.
 
 Drawn canvases are remembered (`CanvasCache`, a few per renderer): an exposure whose channels, window and lit
 LEDs equal those of a recent one (a fixation without jitter, a blink) is not drawn again; only the sensor's
@@ -37,6 +37,7 @@ import numpy as np
 from eyehil.emulator.device.appearance import AppearanceSolver, ChannelLayout, outline_from_rows
 from eyehil.emulator.device.subject import Subject
 from eyehil.emulator.render.geometry import EyeOutline
+from eyehil.emulator.render.noise import CounterNoise, Noise
 from eyehil.emulator.render.renderer import (
     DEFAULT_ROI,
     Canvas,
@@ -113,7 +114,7 @@ class ExposureRenderer:
         return min(int(size[0]), self.sensor_px[0]), min(int(size[1]), self.sensor_px[1])
 
 
-def render_exposure(renderer: ExposureRenderer, values: np.ndarray, eye_index: int, rng: np.random.Generator, *,
+def render_exposure(renderer: ExposureRenderer, values: np.ndarray, eye_index: int, rng: Noise, *,
                     leds: int | None = None, size: tuple[int, int] = DEFAULT_ROI,
                     centre_px: np.ndarray | None = None) -> Frame:
     """One eye of one exposure: a window of `size` around its pupil (see the module docstring); `leds`: how
@@ -131,7 +132,7 @@ def render_exposure(renderer: ExposureRenderer, values: np.ndarray, eye_index: i
 
 
 def render_region(renderer: ExposureRenderer, values: np.ndarray, eye_indices: tuple[int, ...],
-                  region: tuple[int, int, int, int], rng: np.random.Generator, *, leds: int | None = None) -> Frame:
+                  region: tuple[int, int, int, int], rng: Noise, *, leds: int | None = None) -> Frame:
     """The eyes `eye_indices` of one exposure `values` (E, C) drawn into the sensor window `region` (x, y, w, h) px."""
     rows = np.asarray(values, dtype=float)[list(eye_indices)].reshape(len(eye_indices), -1)
     x, y, w, h = (int(v) for v in region)
@@ -144,7 +145,7 @@ def render_region(renderer: ExposureRenderer, values: np.ndarray, eye_indices: t
 
 
 def _render(renderer: ExposureRenderer, key: tuple, window: Callable[[], tuple[EyeOutline, tuple[int, int]]],
-            size: tuple[int, int], rng: np.random.Generator) -> Frame:
+            size: tuple[int, int], rng: Noise) -> Frame:
     """The frame of the window `window()` gives (outline, origin), its canvas remembered under `key` where drawing
     draws no random numbers."""
     settings = renderer.settings
@@ -161,6 +162,6 @@ def _render(renderer: ExposureRenderer, key: tuple, window: Callable[[], tuple[E
     return Frame(image=image, roi_xy=origin, outline=outline, sensor_px=outline.sensor_px)
 
 
-def exposure_rng(seed: int, frame_id: int, eye: int) -> np.random.Generator:
-    """The noise generator of the image of `eye` (a protocols Eye value) of exposure `frame_id`, device seed `seed`."""
-    return np.random.default_rng([int(seed), int(frame_id), int(eye)])
+def exposure_noise(seed: int, frame_id: int, eye: int) -> CounterNoise:
+    """The noise of the image of `eye` (a protocols Eye value) of exposure `frame_id`, device seed `seed`."""
+    return CounterNoise.for_exposure(seed, frame_id, eye)

@@ -16,7 +16,7 @@ publishes encoded images, the encoded bytes):
 - ``kind="thread"``: a thread pool in this process (OpenCV and numpy's large operations release the lock,
   the rest does not: `python -m bench zmq` compares the kinds).
 
-Every image is a function of its job alone (`frames.exposure_rng(seed, frame_id, eye)`), so every kind gives
+Every image is a function of its job alone (`frames.exposure_noise(seed, frame_id, eye)`), so every kind gives
 the same pixels. The pool bounds nothing by itself: its users keep at most a fixed number of jobs in flight
 (`frame_stream.FrameStream`, `pupil.frames.FramePublisher`) and count what they drop. `on_done`, if given, is
 called (from a pool thread) whenever a job finishes, so a device thread waiting on a clock can wake.
@@ -34,7 +34,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from eyehil.emulator.device.frames import ExposureRenderer, exposure_rng, render_exposure, render_region
+from eyehil.emulator.device.frames import ExposureRenderer, exposure_noise, render_exposure, render_region
 from eyehil.parallel import exit_with_parent
 
 MAX_RENDER_WORKERS = 8
@@ -47,7 +47,7 @@ _WORKER_RENDERER: ExposureRenderer | None = None  # a worker process's renderer 
 class RenderJob:
     """One image of one exposure: `rows` (E', C) channels of the eyes drawn; `eye_index` draws that row as a crop
     of `size` (w, h) px around its pupil (`frames.render_exposure`), else `region` (x, y, w, h) px shows the rows
-    `eye_indices` (`frames.render_region`). Noise: `exposure_rng(seed, frame_id, eye)`. `fmt`: also encode the
+    `eye_indices` (`frames.render_region`). Noise: `exposure_noise(seed, frame_id, eye)`. `fmt`: also encode the
     image (`encode`, e.g. the ZeroMQ facade's gray, bgr, jpeg)."""
 
     frame_id: int
@@ -87,7 +87,7 @@ def encode_image(image: np.ndarray, fmt: str) -> bytes:
 
 def render_job(renderer: ExposureRenderer, job: RenderJob) -> Rendered:
     """Render `job` (any thread or process)."""
-    rng = exposure_rng(job.seed, job.frame_id, job.eye)
+    rng = exposure_noise(job.seed, job.frame_id, job.eye)
     if job.region is None:
         frame = render_exposure(renderer, job.rows, int(job.eye_index or 0), rng, leds=job.leds, size=job.size)
     else:

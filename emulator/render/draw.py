@@ -21,6 +21,7 @@ import numpy as np
 from scipy.special import erf
 
 from eyehil.emulator.render.geometry import EyeOutline, aperture_coverage
+from eyehil.emulator.render.noise import Noise, generator_of
 
 Box = tuple[int, int, int, int]  # canvas rows [r0, r1), columns [c0, c1)
 
@@ -61,7 +62,7 @@ def eye_box(o: EyeOutline, levels: Levels, origin: tuple[int, int], size: tuple[
 
 
 def draw_eye(canvas: np.ndarray, origin: tuple[int, int], o: EyeOutline, levels: Levels,
-             rng: np.random.Generator) -> Box | None:
+             rng: Noise) -> Box | None:
     """Draw one eye sample `o` into `canvas` (radiance, DN); return the box drawn (None if off the canvas)."""
     box = eye_box(o, levels, origin, canvas.shape[::-1])
     if box is None:
@@ -165,10 +166,11 @@ def _pixel_gauss(d: np.ndarray, sigma: float) -> np.ndarray:
     return 0.5 * (erf((d + 0.5) * k) - erf((d - 0.5) * k))
 
 
-def _draw_lashes(region, corner, o: EyeOutline, levels: Levels, rng: np.random.Generator) -> None:
+def _draw_lashes(region, corner, o: EyeOutline, levels: Levels, noise: Noise) -> None:
     """Dark strokes from random points of the middle of the upper margin, hanging 30 to 60 % of their length."""
     n = levels.lashes
     lid = o.upper_lid_px
+    rng = generator_of(noise)
     k = rng.uniform(0.2, 0.8, n) * (len(lid) - 1)
     root = np.array([np.interp(k, np.arange(len(lid)), lid[:, i]) for i in (0, 1)]).T
     angle = rng.uniform(np.radians(60), np.radians(120), n)

@@ -61,3 +61,31 @@ void eyehil_expose(const float *signal, const uint16_t *uniform, size_t rows, si
             }
     }
 }
+
+/* SplitMix64's finaliser (emulator/render/noise.py). */
+static inline uint64_t mix64(uint64_t z)
+{
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    return z ^ (z >> 31);
+}
+
+/* The counter noise's draws 0 .. n-1 of `key` (noise.CounterNoise): draw 4j + q is bits [16q, 16q + 16) of
+ * mix64(key + (j + 1) * gamma). */
+void eyehil_counter_draws(uint64_t key, size_t n, uint16_t *out)
+{
+    const uint64_t gamma = 0x9E3779B97F4A7C15ULL;
+    size_t words = n / 4;
+    for (size_t j = 0; j < words; j++) {
+        uint64_t z = mix64(key + (j + 1) * gamma);
+        out[4 * j] = (uint16_t)z;
+        out[4 * j + 1] = (uint16_t)(z >> 16);
+        out[4 * j + 2] = (uint16_t)(z >> 32);
+        out[4 * j + 3] = (uint16_t)(z >> 48);
+    }
+    if (n % 4) {
+        uint64_t z = mix64(key + (words + 1) * gamma);
+        for (size_t q = 0; q < n % 4; q++)
+            out[4 * words + q] = (uint16_t)(z >> (16 * q));
+    }
+}

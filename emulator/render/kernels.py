@@ -1,4 +1,5 @@
-"""The renderer's compiled kernel (`kernels.c`): the sensor's noise over a canvas in one pass.
+"""The renderer's compiled kernels (`kernels.c`): the sensor's noise over a canvas in one pass, and the counter noise's
+draws (`eyehil.emulator.render.noise`).
 
 `eyehil.emulator.render.renderer.expose` uses `expose_flat` for a canvas that is flat outside its boxes (what
 `expose_canvas` passes) when it can be had, and its numpy path otherwise; both give the same image, bit for bit
@@ -27,6 +28,8 @@ def _declare(lib: ctypes.CDLL) -> None:
     p, size, f = ctypes.c_void_p, ctypes.c_size_t, ctypes.c_float
     lib.eyehil_expose.argtypes = (p, p, size, size, p, p, size, p, f, f, f, ctypes.c_int, p)
     lib.eyehil_expose.restype = None
+    lib.eyehil_counter_draws.argtypes = (ctypes.c_uint64, size, p)
+    lib.eyehil_counter_draws.restype = None
 
 
 _LIB, REASON = load(SOURCE, _declare, FLAGS)
@@ -53,4 +56,12 @@ def expose_flat(signal: np.ndarray, uniform: np.ndarray, flat: np.ndarray, boxes
     _LIB.eyehil_expose(signal.ctypes.data, uniform.ctypes.data, rows, cols, flat.ctypes.data, table.ctypes.data,
                        len(table), normal.ctypes.data, float(k), float(read2), float(hi),
                        int(flat.dtype == np.uint16), out.ctypes.data)
+    return out
+
+
+def counter_draws(key: int, out: np.ndarray) -> np.ndarray:
+    """Fill `out` (n,) uint16, contiguous, with the draws 0 .. n-1 of counter noise `key` (`noise.CounterNoise`)."""
+    if out.dtype != np.uint16 or out.ndim != 1 or not out.flags.c_contiguous:
+        raise ValueError("counter draws go into a contiguous 1-D uint16 array")
+    _LIB.eyehil_counter_draws(key, out.size, out.ctypes.data)
     return out

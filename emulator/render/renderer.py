@@ -10,10 +10,11 @@ noise and saturation:
     noise  = N(0, 1) * sqrt((g read_noise_dn)^2 + g k signal),    k = saturation_dn / full_well_e (DN/e-)
     pixel  = clip(round(signal + noise), 0, saturation_dn)
 
-The normal deviates are 16-bit uniform integers (the raw 64-bit words of the caller's `numpy.random.Generator`'s
-bit generator, four to a word) mapped through the inverse normal CDF (exact quantiles, tails cut at 4.3 sigma):
-about five times faster than `Generator.standard_normal`. A frame is a deterministic function of its geometry,
-settings and generator state.
+The normal deviates are 16-bit uniform integers (`noise.uniform16`: the raw 64-bit words of the caller's
+`numpy.random.Generator`'s bit generator, four to a word, or a `noise.CounterNoise`'s draws) mapped through the
+inverse normal CDF (exact quantiles, tails cut at 4.3 sigma): about five times faster than
+`Generator.standard_normal`. A frame is a deterministic function of its geometry, settings and generator state (or
+counter noise key).
 
 Windows: a region of interest (`render_roi`, default 320 x 240 px centred on the pupil, kept on the
 sensor) as real devices stream, or the full sensor (`render_full`, every eye of the sample). Ground truth
@@ -36,6 +37,7 @@ from eyehil.emulator.features import Features
 from eyehil.emulator.render import kernels
 from eyehil.emulator.render.draw import Box, Levels, draw_eye
 from eyehil.emulator.render.geometry import EyeOutline, aperture_distance, eye_outlines
+from eyehil.emulator.render.noise import Noise, uniform16
 from eyehil.emulator.scene import Scene
 
 _NORMAL_TABLE = ndtri((np.arange(65536) + 0.5) / 65536).astype(np.float32)
@@ -136,7 +138,7 @@ def roi_window(centre_px: np.ndarray, size: tuple[int, int], sensor_px: tuple[in
     return int(np.clip(round(cx - w / 2), 0, sw - w)), int(np.clip(round(cy - h / 2), 0, sh - h))
 
 
-def render_features(features: Features, eyes: EyeModel, scene: Scene, rng: np.random.Generator, *,
+def render_features(features: Features, eyes: EyeModel, scene: Scene, rng: Noise, *,
                     index: Iterable[tuple[int, int, int, int]] | None = None, roi: tuple[int, int] | None = DEFAULT_ROI,
                     blink: float | np.ndarray = 0.0, settings: RenderSettings | None = None,
                     ) -> Iterator[tuple[tuple[int, ...], Frame]]:
@@ -153,7 +155,7 @@ def render_features(features: Features, eyes: EyeModel, scene: Scene, rng: np.ra
             yield (e, h, t), render_full(outline[e, :, h, t], rng, settings=settings)
 
 
-def render_roi(outline: EyeOutline, rng: np.random.Generator, *, size: tuple[int, int] = DEFAULT_ROI,
+def render_roi(outline: EyeOutline, rng: Noise, *, size: tuple[int, int] = DEFAULT_ROI,
                centre_px: np.ndarray | None = None, settings: RenderSettings | None = None) -> Frame:
     """A region of interest of one eye sample (outline shape ()), centred on `centre_px` (default its pupil)."""
     if outline.shape != ():
@@ -163,13 +165,13 @@ def render_roi(outline: EyeOutline, rng: np.random.Generator, *, size: tuple[int
     return render_window(outline[None], rng, origin=origin, size=size, settings=settings)
 
 
-def render_full(outline: EyeOutline, rng: np.random.Generator, *, settings: RenderSettings | None = None) -> Frame:
+def render_full(outline: EyeOutline, rng: Noise, *, settings: RenderSettings | None = None) -> Frame:
     """The full sensor with every eye of `outline` (shape () or (n,), e.g. both sides of one fixation)."""
     batch = outline[None] if outline.shape == () else outline
     return render_window(batch, rng, origin=(0, 0), size=outline.sensor_px, settings=settings)
 
 
-def render_window(outline: EyeOutline, rng: np.random.Generator, *, origin: tuple[int, int], size: tuple[int, int],
+def render_window(outline: EyeOutline, rng: Noise, *, origin: tuple[int, int], size: tuple[int, int],
                   settings: RenderSettings | None = None) -> Frame:
     """Eyes `outline` (shape (n,)) drawn into the sensor window at `origin` (x0, y0) of `size` (w, h)."""
     settings = settings or RenderSettings()
@@ -187,7 +189,7 @@ class Canvas:
     boxes: tuple[Box | None, ...]
 
 
-def draw_window(outline: EyeOutline, rng: np.random.Generator, *, origin: tuple[int, int], size: tuple[int, int],
+def draw_window(outline: EyeOutline, rng: Noise, *, origin: tuple[int, int], size: tuple[int, int],
                 settings: RenderSettings) -> Canvas:
     """The noiseless canvas of eyes `outline` (n,) in the sensor window at `origin` (x0, y0) of `size` (w, h). Its
     signal is this thread's scratch array, overwritten by the next call (copy it to keep it). Draws random numbers
@@ -201,7 +203,7 @@ def draw_window(outline: EyeOutline, rng: np.random.Generator, *, origin: tuple[
     return Canvas(canvas, boxes)
 
 
-def expose_canvas(canvas: Canvas, rng: np.random.Generator, settings: RenderSettings) -> np.ndarray:
+def expose_canvas(canvas: Canvas, rng: Noise, settings: RenderSettings) -> np.ndarray:
     """The image of `canvas` through the sensor (`expose`); the canvas is left as it is."""
     read, k = _noise(settings.sensor)
     signal = canvas.signal if read > 0 or k > 0 else canvas.signal.copy()  # noiseless: quantised in place
@@ -217,7 +219,7 @@ def _blur(canvas: np.ndarray, box: Box | None, sigma: float) -> None:
     cv2.GaussianBlur(region, (0, 0), sigma, dst=region, borderType=cv2.BORDER_REPLICATE)
 
 
-def expose(signal: np.ndarray, sensor: Sensor, rng: np.random.Generator, *,
+def expose(signal: np.ndarray, sensor: Sensor, rng: Noise, *,
            flat: tuple[float, list[Box | None]] | None = None) -> np.ndarray:
     """Add read and shot noise to `signal` (float32 DN, modified in place), saturate and quantise to uint8
     (uint16 above 8 bits).
@@ -278,12 +280,6 @@ def _quantise(signal: np.ndarray, sensor: Sensor) -> np.ndarray:
 def flat_table(level: float, sensor: Sensor) -> np.ndarray:
     """The pixel of a signal of `level` DN for each of the 65,536 uniform draws (`_pixels` of each)."""
     return _pixels(np.full(65536, level, np.float32), np.arange(65536, dtype=np.uint16), sensor)
-
-
-def uniform16(rng: np.random.Generator, n: int) -> np.ndarray:
-    """`n` uniform 16-bit integers: the generator's raw 64-bit words, four to a word. Ten times faster than
-    `Generator.bytes`, which draws 32-bit integers and copies them into a bytes object."""
-    return rng.bit_generator.random_raw(-(-n // 4)).view(np.uint16)[:n]
 
 
 def _scratch(shape: tuple[int, ...]) -> list[np.ndarray]:

@@ -23,7 +23,7 @@ from eyehil.drivers.detect import detect_eye
 from eyehil.drivers.frames import FrameReader
 from eyehil.drivers.setup_file import load_geometry
 from eyehil.emulator.device.build import build_subject, options_from_query
-from eyehil.emulator.device.frames import ExposureRenderer, exposure_rng, render_exposure
+from eyehil.emulator.device.frames import ExposureRenderer, exposure_noise, render_exposure
 from eyehil.emulator.device.setup_file import write_geometry
 from eyehil.emulator.scene import load_scene
 from eyehil.protocols import Eye, GlintFlags, PupilFlags, StreamSelect
@@ -61,7 +61,7 @@ def _expected(options: dict, samples, eyes: tuple[Eye, ...], n_leds: int) -> dic
     for s, values, blink in zip(samples, obs.values, obs.blink, strict=True):
         for i, eye in enumerate(eyes):
             if not blink:
-                rng = exposure_rng(options["seed"], s.frame_id, eye)
+                rng = exposure_noise(options["seed"], s.frame_id, eye)
                 out[s.frame_id, eye] = render_exposure(renderer, values, i, rng, leds=n_leds)
     subject.close()
     return out

@@ -4,7 +4,7 @@ Which exposures: every k-th, k = max(1, round(rate / frame_rate)) (by the camera
 publishing is on. Each image is the eye's fixed window (`zmq_datums.EyeWindow`) drawn by
 `eyehil.emulator.device.frames.render_region` from the exposure's channels with every tracked eye in it (during a
 blink: the eye's last open row with the lids shut, `appearance.closed`), noise from
-`frames.exposure_rng(seed, frame_id, eye)`. Eyes sharing a window (the full sensor) share one rendering.
+`frames.exposure_noise(seed, frame_id, eye)`. Eyes sharing a window (the full sensor) share one rendering.
 
 Payload (`eyehil.protocols.pupil.frame_datum`): {topic, width, height, index, timestamp, format} and one raw frame:
 ``gray`` H x W bytes, ``bgr`` H x W x 3 (the gray value in each channel), ``jpeg`` (`cv2.imencode`, a
