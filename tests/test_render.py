@@ -14,6 +14,7 @@ from eyehil.emulator.eye.published import published_eyes
 from eyehil.emulator.forward import Poses, simulate
 from eyehil.emulator.render import kernels
 from eyehil.emulator.render.geometry import _upsampler, eye_outlines, pupil_polar
+from eyehil.emulator.render.noise import CounterNoise
 from eyehil.emulator.render.renderer import (
     Appearance,
     RenderSettings,
@@ -112,11 +113,17 @@ def test_frames_are_deterministic_given_the_generator(guestrin):
 NO_KERNEL = pytest.mark.skipif(not kernels.AVAILABLE, reason=f"compiled kernel unavailable: {kernels.REASON}")
 #: expose's flat-canvas path: the compiled kernel where it is built, and the numpy path.
 FLAT_PATHS = [pytest.param(True, marks=NO_KERNEL, id="compiled"), pytest.param(False, id="numpy")]
+NOISES = ["generator", "counter"]  # a numpy generator's draws, or a counter noise's (computed in the kernel's pass)
 
 
+def _noise(kind: str, seed: int):
+    return np.random.default_rng(seed) if kind == "generator" else CounterNoise(seed)
+
+
+@pytest.mark.parametrize("noise", NOISES)
 @pytest.mark.parametrize("compiled", FLAT_PATHS)
 @pytest.mark.parametrize("sensor", [Sensor(), Sensor(gain_db=12.0, read_noise_dn=3.0), Sensor(saturation_dn=1023)])
-def test_flat_regions_from_the_table_equal_the_pixel_by_pixel_noise(sensor, compiled, monkeypatch) -> None:
+def test_flat_regions_from_the_table_equal_the_pixel_by_pixel_noise(sensor, compiled, noise, monkeypatch) -> None:
     monkeypatch.setattr(kernels, "AVAILABLE", compiled)
     rng = np.random.default_rng(3)
     canvas = np.full((120, 160), np.float32(40.0 * 10 ** (sensor.gain_db / 20)), np.float32)
@@ -125,8 +132,8 @@ def test_flat_regions_from_the_table_equal_the_pixel_by_pixel_noise(sensor, comp
         canvas[r0:r1, c0:c1] = rng.uniform(0.0, 1.2 * sensor.saturation_dn, (r1 - r0, c1 - c0))
     canvas[:5, :5] = -3.0  # below zero and saturated values take the same paths in both
     boxes.append((0, 5, 0, 5))
-    flat = expose(canvas.copy(), sensor, np.random.default_rng(9), flat=(float(canvas[-1, 0]), boxes))
-    plain = expose(canvas.copy(), sensor, np.random.default_rng(9))
+    flat = expose(canvas.copy(), sensor, _noise(noise, 9), flat=(float(canvas[-1, 0]), boxes))
+    plain = expose(canvas.copy(), sensor, _noise(noise, 9))
     assert flat.dtype == plain.dtype and np.array_equal(flat, plain)
     assert len(np.unique(flat[-30:, :15])) > 3  # the flat part is noisy, not a constant
 
@@ -134,10 +141,11 @@ def test_flat_regions_from_the_table_equal_the_pixel_by_pixel_noise(sensor, comp
 @NO_KERNEL
 @settings(max_examples=150, deadline=None)
 @given(data=st.data(), sensor=st.sampled_from([Sensor(), Sensor(gain_db=18.0, read_noise_dn=4.0),
-                                               Sensor(saturation_dn=4095, full_well_e=3000.0)]))
-def test_the_compiled_exposure_is_the_numpy_one_bit_for_bit_property(data, sensor) -> None:
-    """Any window size, level and set of boxes (overlapping, touching the edges, empty, None): the kernel gives
-    the numpy path's image and leaves the canvas as it was."""
+                                               Sensor(saturation_dn=4095, full_well_e=3000.0)]),
+       noise=st.sampled_from(NOISES))
+def test_the_compiled_exposure_is_the_numpy_one_bit_for_bit_property(data, sensor, noise) -> None:
+    """Any window size, level and set of boxes (overlapping, touching the edges, empty, None), either noise: the
+    kernel gives the numpy path's image and leaves the canvas as it was."""
     h, w = data.draw(st.integers(1, 60)), data.draw(st.integers(1, 80))
     level = data.draw(st.floats(0.0, 1.1 * sensor.saturation_dn, width=32))
     rng = np.random.default_rng(data.draw(st.integers(0, 2**32)))
@@ -153,8 +161,8 @@ def test_the_compiled_exposure_is_the_numpy_one_bit_for_bit_property(data, senso
     before = canvas.copy()
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(kernels, "AVAILABLE", False)
-        expected = expose(canvas.copy(), sensor, np.random.default_rng(seed), flat=(level, boxes))
-    got = expose(canvas, sensor, np.random.default_rng(seed), flat=(level, boxes))
+        expected = expose(canvas.copy(), sensor, _noise(noise, seed), flat=(level, boxes))
+    got = expose(canvas, sensor, _noise(noise, seed), flat=(level, boxes))
     assert got.dtype == expected.dtype and np.array_equal(got, expected)
     assert np.array_equal(canvas, before)
 

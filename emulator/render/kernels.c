@@ -8,6 +8,34 @@
 #include <stddef.h>
 #include <stdint.h>
 
+/* SplitMix64's finaliser (emulator/render/noise.py). */
+static inline uint64_t mix64(uint64_t z)
+{
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    return z ^ (z >> 31);
+}
+
+/* The counter noise's draws 0 .. n-1 of `key` (noise.CounterNoise): draw 4j + q is bits [16q, 16q + 16) of
+ * mix64(key + (j + 1) * gamma). */
+void eyehil_counter_draws(uint64_t key, size_t n, uint16_t *out)
+{
+    const uint64_t gamma = 0x9E3779B97F4A7C15ULL;
+    size_t words = n / 4;
+    for (size_t j = 0; j < words; j++) {
+        uint64_t z = mix64(key + (j + 1) * gamma);
+        out[4 * j] = (uint16_t)z;
+        out[4 * j + 1] = (uint16_t)(z >> 16);
+        out[4 * j + 2] = (uint16_t)(z >> 32);
+        out[4 * j + 3] = (uint16_t)(z >> 48);
+    }
+    if (n % 4) {
+        uint64_t z = mix64(key + (words + 1) * gamma);
+        for (size_t q = 0; q < n % 4; q++)
+            out[4 * words + q] = (uint16_t)(z >> (16 * q));
+    }
+}
+
 /* The pixel of signal s with the noise of uniform draw u, as renderer._pixels then _quantise compute it:
  * sigma = sqrt(max(s k, 0) + read2) * normal[u]; clip(s + sigma + 0.5, 0, hi), truncated. */
 static inline float noisy(float s, uint16_t u, const float *normal, float k, float read2, float hi)
@@ -62,30 +90,61 @@ void eyehil_expose(const float *signal, const uint16_t *uniform, size_t rows, si
     }
 }
 
-/* SplitMix64's finaliser (emulator/render/noise.py). */
-static inline uint64_t mix64(uint64_t z)
-{
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
-    return z ^ (z >> 31);
-}
 
-/* The counter noise's draws 0 .. n-1 of `key` (noise.CounterNoise): draw 4j + q is bits [16q, 16q + 16) of
- * mix64(key + (j + 1) * gamma). */
-void eyehil_counter_draws(uint64_t key, size_t n, uint16_t *out)
+/* The image of `signal` as eyehil_expose computes it, with the counter noise of `key` (noise.CounterNoise) for its
+ * draws, which are computed here (each once outside the boxes, their words again inside them) and never stored. */
+void eyehil_expose_counter(const float *signal, uint64_t key, size_t rows, size_t cols, const void *flat,
+                           const int64_t *boxes, size_t nboxes, const float *normal, float k, float read2, float hi,
+                           int wide, void *out)
 {
     const uint64_t gamma = 0x9E3779B97F4A7C15ULL;
-    size_t words = n / 4;
-    for (size_t j = 0; j < words; j++) {
-        uint64_t z = mix64(key + (j + 1) * gamma);
-        out[4 * j] = (uint16_t)z;
-        out[4 * j + 1] = (uint16_t)(z >> 16);
-        out[4 * j + 2] = (uint16_t)(z >> 32);
-        out[4 * j + 3] = (uint16_t)(z >> 48);
+    size_t n = rows * cols, words = n / 4;
+    if (wide) {
+        const uint16_t *table = flat;
+        uint16_t *dst = out;
+        for (size_t j = 0; j < words; j++) {
+            uint64_t z = mix64(key + (j + 1) * gamma);
+            dst[4 * j] = table[(uint16_t)z];
+            dst[4 * j + 1] = table[(uint16_t)(z >> 16)];
+            dst[4 * j + 2] = table[(uint16_t)(z >> 32)];
+            dst[4 * j + 3] = table[(uint16_t)(z >> 48)];
+        }
+        for (size_t i = 4 * words; i < n; i++)
+            dst[i] = table[(uint16_t)(mix64(key + (words + 1) * gamma) >> (16 * (i % 4)))];
+    } else {
+        const uint8_t *table = flat;
+        uint8_t *dst = out;
+        for (size_t j = 0; j < words; j++) {
+            uint64_t z = mix64(key + (j + 1) * gamma);
+            dst[4 * j] = table[(uint16_t)z];
+            dst[4 * j + 1] = table[(uint16_t)(z >> 16)];
+            dst[4 * j + 2] = table[(uint16_t)(z >> 32)];
+            dst[4 * j + 3] = table[(uint16_t)(z >> 48)];
+        }
+        for (size_t i = 4 * words; i < n; i++)
+            dst[i] = table[(uint16_t)(mix64(key + (words + 1) * gamma) >> (16 * (i % 4)))];
     }
-    if (n % 4) {
-        uint64_t z = mix64(key + (words + 1) * gamma);
-        for (size_t q = 0; q < n % 4; q++)
-            out[4 * words + q] = (uint16_t)(z >> (16 * q));
+    for (size_t b = 0; b < nboxes; b++) {
+        const int64_t *box = boxes + 4 * b;
+        size_t r0 = box[0] < 0 ? 0 : (size_t)box[0], r1 = box[1] < 0 ? 0 : (size_t)box[1];
+        size_t c0 = box[2] < 0 ? 0 : (size_t)box[2], c1 = box[3] < 0 ? 0 : (size_t)box[3];
+        r1 = r1 < rows ? r1 : rows;
+        c1 = c1 < cols ? c1 : cols;
+        for (size_t r = r0; r < r1; r++) {
+            size_t word = (size_t)-1;
+            uint64_t z = 0;
+            for (size_t c = c0; c < c1; c++) {
+                size_t i = r * cols + c;
+                if (i / 4 != word) {
+                    word = i / 4;
+                    z = mix64(key + (word + 1) * gamma);
+                }
+                float v = noisy(signal[i], (uint16_t)(z >> (16 * (i % 4))), normal, k, read2, hi);
+                if (wide)
+                    ((uint16_t *)out)[i] = (uint16_t)v;
+                else
+                    ((uint8_t *)out)[i] = (uint8_t)v;
+            }
+        }
     }
 }

@@ -37,7 +37,7 @@ from eyehil.emulator.features import Features
 from eyehil.emulator.render import kernels
 from eyehil.emulator.render.draw import Box, Levels, draw_eye
 from eyehil.emulator.render.geometry import EyeOutline, aperture_distance, eye_outlines
-from eyehil.emulator.render.noise import Noise, uniform16
+from eyehil.emulator.render.noise import CounterNoise, Noise, uniform16
 from eyehil.emulator.scene import Scene
 
 _NORMAL_TABLE = ndtri((np.arange(65536) + 0.5) / 65536).astype(np.float32)
@@ -232,13 +232,18 @@ def expose(signal: np.ndarray, sensor: Sensor, rng: Noise, *,
     read, k = _noise(sensor)
     if not (read > 0 or k > 0):
         return _quantise(signal, sensor)
+    if flat is not None and kernels.AVAILABLE:  # the same image in one compiled pass (eyehil.emulator.render.kernels)
+        level, boxes = flat
+        constants = (np.float32(k), np.float32(read * read), np.float32(sensor.saturation_dn + 0.49))
+        if isinstance(rng, CounterNoise):
+            return kernels.expose_counter(signal, rng.key, flat_table(float(level), sensor), boxes, _NORMAL_TABLE,
+                                          *constants)
+        return kernels.expose_flat(signal, uniform16(rng, signal.size).reshape(signal.shape),
+                                   flat_table(float(level), sensor), boxes, _NORMAL_TABLE, *constants)
     uniform = uniform16(rng, signal.size).reshape(signal.shape)
     if flat is None:
         return _pixels(signal, uniform, sensor, _scratch(signal.shape)[1:])
     level, boxes = flat
-    if kernels.AVAILABLE:  # the same image in one compiled pass (eyehil.emulator.render.kernels)
-        return kernels.expose_flat(signal, uniform, flat_table(float(level), sensor), boxes, _NORMAL_TABLE,
-                                   np.float32(k), np.float32(read * read), np.float32(sensor.saturation_dn + 0.49))
     out = np.take(flat_table(float(level), sensor), uniform)
     for box in boxes:
         if box is not None:

@@ -59,10 +59,11 @@ def test_regions_and_windows_are_remembered_apart(subject, values) -> None:
     assert renderer.canvases.misses == 4 and renderer.canvases.hits == 0
     again = render_region(renderer, row, (0, 1), (0, 0, 640, 480), exposure_noise(1, 0, 3))
     assert renderer.canvases.hits == 1 and np.array_equal(again.image, region.image)
-    for frame, fresh in ((window, render_exposure(_fresh(renderer), row, 0, exposure_noise(1, 0, 1), size=(200, 160))),
-                         (other_eye, render_exposure(_fresh(renderer), row, 1, exposure_noise(1, 0, 2), size=(200, 160))),
-                         (one_led, render_exposure(_fresh(renderer), row, 0, exposure_noise(1, 0, 1), size=(200, 160),
-                                                   leds=1))):
+    def fresh_render(eye_index: int, eye: int, **kw):
+        return render_exposure(_fresh(renderer), row, eye_index, exposure_noise(1, 0, eye), size=(200, 160), **kw)
+
+    pairs = ((window, fresh_render(0, 1)), (other_eye, fresh_render(1, 2)), (one_led, fresh_render(0, 1, leds=1)))
+    for frame, fresh in pairs:
         assert np.array_equal(frame.image, fresh.image) and frame.roi_xy == fresh.roi_xy
     assert not np.array_equal(window.image, one_led.image)  # one glint fewer
 
