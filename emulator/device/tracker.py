@@ -289,9 +289,11 @@ class VirtualTracker:
         """Take up to `max_bytes` (default all) queued bytes for the host; chunks join as the frame budget allows."""
         if self._with_frames and self.frames.pending and self.state is DeviceState.STREAMING:
             data, n = self.frames.release(len(self._out), self._seq)
-            self._out += data
             self._seq = (self._seq + n) % U32
             self._tx["tx_frames"] += n
+            if not self._out and (max_bytes is None or len(data) <= max_bytes):
+                return data  # only chunks wait: handed over as they are, not copied through the queue
+            self._out += data
         return take(self._out, max_bytes)
 
     def close(self) -> None:

@@ -203,7 +203,9 @@ def pupil_polar(points: np.ndarray, valid: np.ndarray, centre: np.ndarray, axes:
     theta = np.take_along_axis(theta, order, axis=-1)
     r = np.take_along_axis(np.hypot(dx, dy), order, axis=-1)
     both = np.stack([theta, r])
-    step = np.roll(both, -1, axis=-1) - np.roll(both, 1, axis=-1)  # next - previous, around the outline
+    following = np.concatenate([both[..., 1:], both[..., :1]], axis=-1)  # around the outline (np.roll, faster)
+    preceding = np.concatenate([both[..., -1:], both[..., :-1]], axis=-1)
+    step = following - preceding
     span = np.mod(step[0], 2.0 * np.pi)
     dr = step[1] / np.where(span > 0, span, np.inf)
     return theta, r, dr

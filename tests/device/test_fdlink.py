@@ -10,6 +10,7 @@ import threading
 import serial
 from waiting import wait_until
 
+from eyehil.emulator.device.links.base import take
 from eyehil.emulator.device.links.fdlink import MAX_LINK_BACKLOG
 from eyehil.emulator.device.links.pty import PtyLink
 from eyehil.emulator.device.links.tcp import TcpLink
@@ -113,3 +114,13 @@ def test_tcp_reconnection_and_close_while_the_writer_waits_for_a_host_that_does_
         if reader is not None:
             reader.close()
     assert not [t for t in threading.enumerate() if t.name.startswith(f"eyehil-{link.name}")]
+
+
+def test_take_hands_over_the_front_of_a_buffer_and_keeps_the_rest() -> None:
+    buffer = bytearray(b"abcdef")
+    assert take(buffer, 2) == b"ab" and buffer == bytearray(b"cdef")
+    assert take(buffer, 0) == b"" and buffer == bytearray(b"cdef")
+    assert take(buffer, 100) == b"cdef" and buffer == bytearray()
+    buffer += b"xyz"
+    whole = take(buffer)
+    assert whole == b"xyz" and isinstance(whole, bytes) and buffer == bytearray()

@@ -82,7 +82,12 @@ MAX_REPLY_BACKLOG = 1024 * 1024  # link backlog (bytes) above which the runner s
 def take(buffer: bytearray, max_bytes: int | None = None) -> bytes:
     """Remove and return up to `max_bytes` (default all) bytes from the front of a core's output buffer."""
     n = len(buffer) if max_bytes is None else min(max_bytes, len(buffer))
-    data = bytes(buffer[:n])
+    if n == len(buffer):  # all of it (the usual case): one copy
+        data = bytes(buffer)
+        buffer.clear()
+        return data
+    with memoryview(buffer) as view:
+        data = bytes(view[:n])
     del buffer[:n]
     return data
 
