@@ -114,7 +114,7 @@ class _Partial:
     """An image being reassembled: its first chunk's geometry, the buffer and the chunks seen."""
 
     first: FrameChunk
-    buffer: bytearray
+    buffer: np.ndarray  # (image bytes,) uint8, zeros where no chunk has landed; it becomes the image's pixels
     seen: set[int] = field(default_factory=set)
 
 
@@ -148,13 +148,13 @@ class ImageAssembler:
             if not self.plausible(chunk):
                 self.refused += 1
                 return None
-            part = _Partial(chunk, bytearray(chunk.image_size))
+            part = _Partial(chunk, np.zeros(chunk.image_size, np.uint8))
             self._partial[chunk.eye] = part
         if not _same_geometry(part.first, chunk):
             self.inconsistent += 1
             del self._partial[chunk.eye]
             return None
-        part.buffer[chunk.offset : chunk.offset + len(chunk.data)] = chunk.data
+        part.buffer.data[chunk.offset : chunk.offset + len(chunk.data)] = chunk.data
         part.seen.add(chunk.chunk_index)
         return self._finish(chunk.eye) if len(part.seen) == chunk.chunk_count else None
 
@@ -163,7 +163,8 @@ class ImageAssembler:
         part = self._partial.pop(eye)
         c = part.first
         dtype = np.uint8 if c.pixel_format is PixelFormat.MONO8 else np.dtype("<u2")
-        pixels = np.frombuffer(bytes(part.buffer), dtype).reshape(c.height, c.width)
+        pixels = part.buffer.view(dtype).reshape(c.height, c.width)  # no copy: the buffer is the image's alone
+        pixels.flags.writeable = False
         self.complete += 1
         return Image(c.frame_id, c.eye, c.roi_x, c.roi_y, pixels)
 

@@ -192,4 +192,7 @@ class FrameChunk:
         """Decode; the pixel bytes are the rest of the payload."""
         if len(payload) < cls.STRUCT.size:
             raise MalformedPayloadError(f"FRAME_CHUNK payload of {len(payload)} bytes is too short")
-        return cls(*cls.STRUCT.unpack_from(payload), payload[cls.STRUCT.size :])
+        frame_id, eye, fmt, *rest = cls.STRUCT.unpack_from(payload)
+        # the enums looked up here, so that __post_init__ need not replace two frozen fields (slow) per chunk
+        return cls(frame_id, _member(Eye, _EYES, eye), _member(PixelFormat, _PIXEL_FORMATS, fmt), *rest,
+                   payload[cls.STRUCT.size :])
