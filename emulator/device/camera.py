@@ -26,6 +26,8 @@ from eyehil.protocols.enums import Eye, GlintFlags, PupilFlags
 
 PREPARE_S = 0.05  # features are prepared this far ahead (device seconds)
 FAST_PREPARE_S = 0.25  # the same on a fast clock, whose time waits for the subject's solves (fewer, larger blocks)
+FAST_PREPARE_MIN = 100  # and at least this many exposures: a block costs about 1 ms besides its exposures (at 100 Hz
+# a quarter second of them cost 27 us an image, 100 of them 9)
 
 
 @dataclass(frozen=True)
@@ -113,6 +115,7 @@ class Camera:
         self._ready: Exposures | None = None  # prepared exposures, of which the first `_pos` are taken
         self._pos = 0
         self.prepare_s = PREPARE_S  # how far ahead exposures are prepared (device seconds)
+        self.prepare_min = 1  # and at least this many exposures
 
     def start(self, t0_us: int, rate_hz: int, selection: Selection) -> None:
         """Begin exposing at `rate_hz` after `t0_us`."""
@@ -180,10 +183,10 @@ class Camera:
         self.frames_since_power_up += count
 
     def _prepare(self, at_least: int) -> None:
-        """Observe and detect the next block of exposures after those already prepared (at least `at_least`, and
-        `prepare_s` of them: each block costs about as much as one exposure)."""
+        """Observe and detect the next block of exposures after those already prepared (at least `at_least`,
+        `prepare_min` and `prepare_s` of them: each block costs about as much as one exposure)."""
         have = self._left
-        count = max(at_least, round(self._rate * self.prepare_s))
+        count = max(at_least, self.prepare_min, round(self._rate * self.prepare_s))
         k = np.arange(self._k + have, self._k + have + count)
         times = self._t0 + np.round((k + 1) * 1e6 / self._rate).astype(np.int64)
         obs = self.subject.observe(times)

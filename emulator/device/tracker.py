@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from eyehil.emulator.device.camera import FAST_PREPARE_S, Camera, Selection
+from eyehil.emulator.device.camera import FAST_PREPARE_MIN, FAST_PREPARE_S, Camera, Selection
 from eyehil.emulator.device.clock import Clock, RealTimeClock
 from eyehil.emulator.device.frame_stream import FrameOptions, FrameStream
 from eyehil.emulator.device.links.base import FAST_LOW_WATER, take
@@ -77,7 +77,7 @@ class VirtualTracker:
         self.tracked = tuple(Eye.RIGHT if s == "right" else Eye.LEFT for s in scene.sides)
         self.camera = Camera(subject, self.sensor, self.tracked)
         if self.clock.fast:
-            self.camera.prepare_s = FAST_PREPARE_S
+            self.camera.prepare_s, self.camera.prepare_min = FAST_PREPARE_S, FAST_PREPARE_MIN
         self.frames = FrameStream.for_subject(subject, self.tracked, frames)  # None: this subject has no images
         self._stream = StreamSelect.FEATURES
         self.max_output_bytes = max_output_bytes

@@ -75,7 +75,8 @@ def test_prepared_until_is_the_last_prepared_exposure_and_a_view_blink_starts_af
     core = build_device(DeviceOptions(clock="fast", rate_hz=RATE_HZ))
     try:
         core.camera.start(0, RATE_HZ, Selection((Eye.RIGHT,), 2))
-        core.camera.take(1)  # a fast clock prepares FAST_PREPARE_S ahead, beyond the view's own lead
+        core.camera.take(1)  # a fast clock prepares FAST_PREPARE_S (and FAST_PREPARE_MIN exposures) ahead, beyond
+        # the view's own lead
         horizon = core.camera.prepared_until_us
         assert horizon > core.clock.now_us() + ViewBlink.LEAD_US
         assert ViewBlink(core).blink(0.2)
@@ -84,3 +85,18 @@ def test_prepared_until_is_the_last_prepared_exposure_and_a_view_blink_starts_af
         assert len(closed) and closed[0] > horizon  # what the camera had prepared stays open-eyed
     finally:
         core.close()
+
+
+def test_a_fast_clock_prepares_blocks_of_at_least_its_minimum_of_exposures() -> None:
+    from eyehil.emulator.device.build import build_device
+    from eyehil.emulator.device.camera import FAST_PREPARE_MIN, FAST_PREPARE_S
+
+    for rate in (100, 1000):
+        core = build_device(DeviceOptions(clock="fast", rate_hz=rate))
+        try:
+            core.camera.start(0, rate, Selection((Eye.RIGHT,), 2))
+            core.camera.take(1)
+            block = max(FAST_PREPARE_MIN, round(rate * FAST_PREPARE_S))
+            assert core.camera.prepared_until_us == core.camera.time_of(block - 1)
+        finally:
+            core.close()
