@@ -51,6 +51,34 @@ static inline float noisy(float s, uint16_t u, const float *normal, float k, flo
     return v < hi ? v : hi;
 }
 
+/* Box `box` (r0, r1, c0, c1) clipped to a canvas of `rows` x `cols`: rows [*r0, *r1), columns [*c0, *c1). */
+static void clip_box(const int64_t *box, size_t rows, size_t cols, size_t *r0, size_t *r1, size_t *c0, size_t *c1)
+{
+    *r0 = box[0] < 0 ? 0 : (size_t)box[0];
+    *r1 = box[1] < 0 ? 0 : (size_t)box[1];
+    *c0 = box[2] < 0 ? 0 : (size_t)box[2];
+    *c1 = box[3] < 0 ? 0 : (size_t)box[3];
+    *r1 = *r1 < rows ? *r1 : rows;
+    *c1 = *c1 < cols ? *c1 : cols;
+}
+
+/* eyehil_expose_counter's pass outside the boxes, for pixels of `type` (uint8_t or uint16_t): each word of the
+ * counter noise gives four pixels' look-ups in `flat`; the last n % 4 pixels take the quarters of one more word. */
+#define COUNTER_FLAT(type)                                                                  \
+    do {                                                                                    \
+        const type *table = flat;                                                           \
+        type *dst = out;                                                                    \
+        for (size_t j = 0; j < words; j++) {                                                \
+            uint64_t z = mix64(key + (j + 1) * gamma);                                      \
+            dst[4 * j] = table[(uint16_t)z];                                                \
+            dst[4 * j + 1] = table[(uint16_t)(z >> 16)];                                    \
+            dst[4 * j + 2] = table[(uint16_t)(z >> 32)];                                    \
+            dst[4 * j + 3] = table[(uint16_t)(z >> 48)];                                    \
+        }                                                                                   \
+        for (size_t i = 4 * words; i < n; i++)                                              \
+            dst[i] = table[(uint16_t)(mix64(key + (words + 1) * gamma) >> (16 * (i % 4)))]; \
+    } while (0)
+
 /* The image (rows x cols, row-major; 8-bit, or 16-bit if `wide`) of the canvas `signal` (float32, read only)
  * with the draws `uniform` (one per pixel): flat[u] outside the boxes (the canvas is flat there, and flat[] is
  * that level's outcome of each draw), each pixel computed inside them. `boxes` holds `nboxes` rows
@@ -73,11 +101,8 @@ void eyehil_expose(const float *signal, const uint16_t *uniform, size_t rows, si
             dst[i] = table[uniform[i]];
     }
     for (size_t b = 0; b < nboxes; b++) {
-        const int64_t *box = boxes + 4 * b;
-        size_t r0 = box[0] < 0 ? 0 : (size_t)box[0], r1 = box[1] < 0 ? 0 : (size_t)box[1];
-        size_t c0 = box[2] < 0 ? 0 : (size_t)box[2], c1 = box[3] < 0 ? 0 : (size_t)box[3];
-        r1 = r1 < rows ? r1 : rows;
-        c1 = c1 < cols ? c1 : cols;
+        size_t r0, r1, c0, c1;
+        clip_box(boxes + 4 * b, rows, cols, &r0, &r1, &c0, &c1);
         for (size_t r = r0; r < r1; r++)
             for (size_t c = c0; c < c1; c++) {
                 size_t i = r * cols + c;
@@ -99,37 +124,13 @@ void eyehil_expose_counter(const float *signal, uint64_t key, size_t rows, size_
 {
     const uint64_t gamma = 0x9E3779B97F4A7C15ULL;
     size_t n = rows * cols, words = n / 4;
-    if (wide) {
-        const uint16_t *table = flat;
-        uint16_t *dst = out;
-        for (size_t j = 0; j < words; j++) {
-            uint64_t z = mix64(key + (j + 1) * gamma);
-            dst[4 * j] = table[(uint16_t)z];
-            dst[4 * j + 1] = table[(uint16_t)(z >> 16)];
-            dst[4 * j + 2] = table[(uint16_t)(z >> 32)];
-            dst[4 * j + 3] = table[(uint16_t)(z >> 48)];
-        }
-        for (size_t i = 4 * words; i < n; i++)
-            dst[i] = table[(uint16_t)(mix64(key + (words + 1) * gamma) >> (16 * (i % 4)))];
-    } else {
-        const uint8_t *table = flat;
-        uint8_t *dst = out;
-        for (size_t j = 0; j < words; j++) {
-            uint64_t z = mix64(key + (j + 1) * gamma);
-            dst[4 * j] = table[(uint16_t)z];
-            dst[4 * j + 1] = table[(uint16_t)(z >> 16)];
-            dst[4 * j + 2] = table[(uint16_t)(z >> 32)];
-            dst[4 * j + 3] = table[(uint16_t)(z >> 48)];
-        }
-        for (size_t i = 4 * words; i < n; i++)
-            dst[i] = table[(uint16_t)(mix64(key + (words + 1) * gamma) >> (16 * (i % 4)))];
-    }
+    if (wide)
+        COUNTER_FLAT(uint16_t);
+    else
+        COUNTER_FLAT(uint8_t);
     for (size_t b = 0; b < nboxes; b++) {
-        const int64_t *box = boxes + 4 * b;
-        size_t r0 = box[0] < 0 ? 0 : (size_t)box[0], r1 = box[1] < 0 ? 0 : (size_t)box[1];
-        size_t c0 = box[2] < 0 ? 0 : (size_t)box[2], c1 = box[3] < 0 ? 0 : (size_t)box[3];
-        r1 = r1 < rows ? r1 : rows;
-        c1 = c1 < cols ? c1 : cols;
+        size_t r0, r1, c0, c1;
+        clip_box(boxes + 4 * b, rows, cols, &r0, &r1, &c0, &c1);
         for (size_t r = r0; r < r1; r++) {
             size_t word = (size_t)-1;
             uint64_t z = 0;
