@@ -217,13 +217,14 @@ def refracted_pupil_centre(o: np.ndarray, e: np.ndarray, c: np.ndarray, R, K, n1
     K = np.asarray(K, float)
     oc = o - c
     along = _dot(e, oc)
-    k_r = -along - np.sqrt(along**2 - (_dot(oc, oc) - R**2))
-    r = o + k_r[..., None] * e
-    zeta = -e
-    eta = (r - c) / R[..., None]
-    ez = _dot(eta, zeta)[..., None]
-    ratio = n1 / n2
-    iota = (ez - np.sqrt(ratio**2 - 1.0 + ez**2)) * eta / ratio - zeta / ratio
-    rc_iota = _dot(r - c, iota)
-    k_p = -rc_iota - np.sqrt(rc_iota**2 - (R**2 - K**2))
+    with np.errstate(invalid="ignore"):  # a negative discriminant is a miss: NaN, as documented
+        k_r = -along - np.sqrt(along**2 - (_dot(oc, oc) - R**2))
+        r = o + k_r[..., None] * e
+        zeta = -e
+        eta = (r - c) / R[..., None]
+        ez = _dot(eta, zeta)[..., None]
+        ratio = n1 / n2
+        iota = (ez - np.sqrt(ratio**2 - 1.0 + ez**2)) * eta / ratio - zeta / ratio
+        rc_iota = _dot(r - c, iota)
+        k_p = -rc_iota - np.sqrt(rc_iota**2 - (R**2 - K**2))
     return r + k_p[..., None] * iota
