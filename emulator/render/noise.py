@@ -12,7 +12,7 @@ generators", OOPSLA; the finaliser is Stafford's "Mix13"): word j is
 and draw 4j + q its bits [16q, 16q + 16) (little end first: the words viewed as uint16). Any draw can be had
 without the ones before it, and no generator object is built per image: the device's images cost 25 us of
 draws (the compiled kernel, `kernels.counter_draws`) where a seeded PCG64 cost 10 us to build and 45 to draw
-(docs/benchmarks.md). The numpy path here gives the same draws bit for bit (tests/test_render.py).
+(docs/benchmarks.md). The numpy path here gives the same draws bit for bit (tests/test_render_noise.py).
 
 `exposure_key(seed, frame_id, eye)` chains the same finaliser over the three numbers, so every image of a
 device has its own key. Anything else random in an image (eyelashes) comes from `generator`, a numpy
