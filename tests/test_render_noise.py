@@ -47,7 +47,7 @@ def test_keys_are_64_bit_and_the_kernel_takes_only_a_flat_uint16_array() -> None
 
 def test_the_draws_are_uniform_and_successive_draws_independent() -> None:
     n = 1_000_003
-    a = CounterNoise.for_exposure(3, 17, 1).uniform16(n)
+    a = CounterNoise(exposure_key(3, 17, 1)).uniform16(n)
     assert a.shape == (n,) and a.dtype == np.uint16
     # chi-square(255): P(< 150) = 2e-8, P(> 380) = 6e-7
     assert 150 < _chi2(np.bincount(a >> 8, minlength=256)) < 380
@@ -58,9 +58,9 @@ def test_the_draws_are_uniform_and_successive_draws_independent() -> None:
 
 def test_images_of_neighbouring_exposures_eyes_and_seeds_have_unrelated_noise() -> None:
     n = 76_800
-    base = CounterNoise.for_exposure(0, 1000, 1).uniform16(n).astype(float)
+    base = CounterNoise(exposure_key(0, 1000, 1)).uniform16(n).astype(float)
     for seed, frame_id, eye in ((0, 1001, 1), (0, 1000, 2), (1, 1000, 1)):
-        other = CounterNoise.for_exposure(seed, frame_id, eye).uniform16(n).astype(float)
+        other = CounterNoise(exposure_key(seed, frame_id, eye)).uniform16(n).astype(float)
         assert abs(np.corrcoef(base, other)[0, 1]) < 4 / np.sqrt(n)  # 4 standard errors
     keys = {exposure_key(s, f, e) for s in range(3) for f in range(200) for e in range(3)}
     assert len(keys) == 3 * 200 * 3

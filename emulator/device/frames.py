@@ -37,7 +37,7 @@ import numpy as np
 from eyehil.emulator.device.appearance import AppearanceSolver, ChannelLayout, outline_from_rows
 from eyehil.emulator.device.subject import Subject
 from eyehil.emulator.render.geometry import EyeOutline
-from eyehil.emulator.render.noise import CounterNoise, Noise
+from eyehil.emulator.render.noise import CounterNoise, Noise, exposure_key
 from eyehil.emulator.render.renderer import (
     DEFAULT_ROI,
     Canvas,
@@ -164,4 +164,4 @@ def _render(renderer: ExposureRenderer, key: tuple, window: Callable[[], tuple[E
 
 def exposure_noise(seed: int, frame_id: int, eye: int) -> CounterNoise:
     """The noise of the image of `eye` (a protocols Eye value) of exposure `frame_id`, device seed `seed`."""
-    return CounterNoise.for_exposure(seed, frame_id, eye)
+    return CounterNoise(exposure_key(seed, frame_id, eye))

@@ -1,12 +1,15 @@
 /*
- * kernels.c - the renderer's compiled kernel, built on first use (emulator/render/kernels.py): a canvas through
- * the sensor's noise in one pass, the same image bit for bit as renderer.expose's numpy path
- * (tests/test_render.py compares them).
+ * kernels.c - the renderer's compiled kernels, built on first use (emulator/render/kernels.py): a canvas through
+ * the sensor's noise in one pass, with the caller's draws or with the counter noise's (noise.py), the same image
+ * bit for bit as renderer.expose's numpy path (tests/test_render.py compares them), and the counter noise's draws
+ * alone (tests/test_render_noise.py).
  *
  * Built with -ffp-contract=off: every operation is one IEEE float32 operation, in numpy's order, never fused.
  */
 #include <stddef.h>
 #include <stdint.h>
+
+#define GAMMA 0x9E3779B97F4A7C15ULL /* SplitMix64's counter increment (noise.py GAMMA) */
 
 /* SplitMix64's finaliser (emulator/render/noise.py). */
 static inline uint64_t mix64(uint64_t z)
@@ -17,20 +20,19 @@ static inline uint64_t mix64(uint64_t z)
 }
 
 /* The counter noise's draws 0 .. n-1 of `key` (noise.CounterNoise): draw 4j + q is bits [16q, 16q + 16) of
- * mix64(key + (j + 1) * gamma). */
+ * mix64(key + (j + 1) * GAMMA). */
 void eyehil_counter_draws(uint64_t key, size_t n, uint16_t *out)
 {
-    const uint64_t gamma = 0x9E3779B97F4A7C15ULL;
     size_t words = n / 4;
     for (size_t j = 0; j < words; j++) {
-        uint64_t z = mix64(key + (j + 1) * gamma);
+        uint64_t z = mix64(key + (j + 1) * GAMMA);
         out[4 * j] = (uint16_t)z;
         out[4 * j + 1] = (uint16_t)(z >> 16);
         out[4 * j + 2] = (uint16_t)(z >> 32);
         out[4 * j + 3] = (uint16_t)(z >> 48);
     }
     if (n % 4) {
-        uint64_t z = mix64(key + (words + 1) * gamma);
+        uint64_t z = mix64(key + (words + 1) * GAMMA);
         for (size_t q = 0; q < n % 4; q++)
             out[4 * words + q] = (uint16_t)(z >> (16 * q));
     }
@@ -51,6 +53,15 @@ static inline float noisy(float s, uint16_t u, const float *normal, float k, flo
     return v < hi ? v : hi;
 }
 
+/* Pixel i of the image `out` (8-bit, or 16-bit if `wide`): `v`, truncated. */
+static inline void put_pixel(void *out, size_t i, float v, int wide)
+{
+    if (wide)
+        ((uint16_t *)out)[i] = (uint16_t)v;
+    else
+        ((uint8_t *)out)[i] = (uint8_t)v;
+}
+
 /* Box `box` (r0, r1, c0, c1) clipped to a canvas of `rows` x `cols`: rows [*r0, *r1), columns [*c0, *c1). */
 static void clip_box(const int64_t *box, size_t rows, size_t cols, size_t *r0, size_t *r1, size_t *c0, size_t *c1)
 {
@@ -69,14 +80,14 @@ static void clip_box(const int64_t *box, size_t rows, size_t cols, size_t *r0, s
         const type *table = flat;                                                           \
         type *dst = out;                                                                    \
         for (size_t j = 0; j < words; j++) {                                                \
-            uint64_t z = mix64(key + (j + 1) * gamma);                                      \
+            uint64_t z = mix64(key + (j + 1) * GAMMA);                                      \
             dst[4 * j] = table[(uint16_t)z];                                                \
             dst[4 * j + 1] = table[(uint16_t)(z >> 16)];                                    \
             dst[4 * j + 2] = table[(uint16_t)(z >> 32)];                                    \
             dst[4 * j + 3] = table[(uint16_t)(z >> 48)];                                    \
         }                                                                                   \
         for (size_t i = 4 * words; i < n; i++)                                              \
-            dst[i] = table[(uint16_t)(mix64(key + (words + 1) * gamma) >> (16 * (i % 4)))]; \
+            dst[i] = table[(uint16_t)(mix64(key + (words + 1) * GAMMA) >> (16 * (i % 4)))]; \
     } while (0)
 
 /* The image (rows x cols, row-major; 8-bit, or 16-bit if `wide`) of the canvas `signal` (float32, read only)
@@ -107,10 +118,7 @@ void eyehil_expose(const float *signal, const uint16_t *uniform, size_t rows, si
             for (size_t c = c0; c < c1; c++) {
                 size_t i = r * cols + c;
                 float v = noisy(signal[i], uniform[i], normal, k, read2, hi);
-                if (wide)
-                    ((uint16_t *)out)[i] = (uint16_t)v;
-                else
-                    ((uint8_t *)out)[i] = (uint8_t)v;
+                put_pixel(out, i, v, wide);
             }
     }
 }
@@ -122,7 +130,6 @@ void eyehil_expose_counter(const float *signal, uint64_t key, size_t rows, size_
                            const int64_t *boxes, size_t nboxes, const float *normal, float k, float read2, float hi,
                            int wide, void *out)
 {
-    const uint64_t gamma = 0x9E3779B97F4A7C15ULL;
     size_t n = rows * cols, words = n / 4;
     if (wide)
         COUNTER_FLAT(uint16_t);
@@ -138,13 +145,10 @@ void eyehil_expose_counter(const float *signal, uint64_t key, size_t rows, size_
                 size_t i = r * cols + c;
                 if (i / 4 != word) {
                     word = i / 4;
-                    z = mix64(key + (word + 1) * gamma);
+                    z = mix64(key + (word + 1) * GAMMA);
                 }
                 float v = noisy(signal[i], (uint16_t)(z >> (16 * (i % 4))), normal, k, read2, hi);
-                if (wide)
-                    ((uint16_t *)out)[i] = (uint16_t)v;
-                else
-                    ((uint8_t *)out)[i] = (uint8_t)v;
+                put_pixel(out, i, v, wide);
             }
         }
     }

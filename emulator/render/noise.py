@@ -53,11 +53,6 @@ class CounterNoise:
         self.key = int(key)
         self._generator: np.random.Generator | None = None
 
-    @classmethod
-    def for_exposure(cls, seed: int, frame_id: int, eye: int) -> CounterNoise:
-        """The noise of `exposure_key(seed, frame_id, eye)`."""
-        return cls(exposure_key(seed, frame_id, eye))
-
     def uniform16(self, n: int, out: np.ndarray | None = None) -> np.ndarray:
         """Draws 0 .. n-1 (uint16), into `out` (n,) if given."""
         if out is None:

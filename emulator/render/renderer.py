@@ -234,12 +234,11 @@ def expose(signal: np.ndarray, sensor: Sensor, rng: Noise, *,
         return _quantise(signal, sensor)
     if flat is not None and kernels.AVAILABLE:  # the same image in one compiled pass (eyehil.emulator.render.kernels)
         level, boxes = flat
-        constants = (np.float32(k), np.float32(read * read), np.float32(sensor.saturation_dn + 0.49))
+        tables = (flat_table(float(level), sensor), boxes, _NORMAL_TABLE, np.float32(k), np.float32(read * read),
+                  np.float32(sensor.saturation_dn + 0.49))
         if isinstance(rng, CounterNoise):
-            return kernels.expose_counter(signal, rng.key, flat_table(float(level), sensor), boxes, _NORMAL_TABLE,
-                                          *constants)
-        return kernels.expose_flat(signal, uniform16(rng, signal.size).reshape(signal.shape),
-                                   flat_table(float(level), sensor), boxes, _NORMAL_TABLE, *constants)
+            return kernels.expose_counter(signal, rng.key, *tables)
+        return kernels.expose_flat(signal, uniform16(rng, signal.size).reshape(signal.shape), *tables)
     uniform = uniform16(rng, signal.size).reshape(signal.shape)
     if flat is None:
         return _pixels(signal, uniform, sensor, _scratch(signal.shape)[1:])
