@@ -13,7 +13,8 @@ from eyehil.emulator.eye.normative import normative_eye
 from eyehil.emulator.eye.published import published_eyes
 from eyehil.emulator.forward import Poses, simulate
 from eyehil.emulator.render import kernels
-from eyehil.emulator.render.geometry import _upsampler, eye_outlines, pupil_polar
+from eyehil.emulator.render.draw import _sub, periodic_lerp
+from eyehil.emulator.render.geometry import _upsampler, clip_unit, eye_outlines, pupil_polar
 from eyehil.emulator.render.noise import CounterNoise
 from eyehil.emulator.render.renderer import (
     Appearance,
@@ -64,6 +65,46 @@ def test_outline_interpolation_matrix_is_the_fft_interpolant(n):
     matrix = _upsampler(n, m)
     np.testing.assert_allclose(z.real @ matrix + 1j * (z.imag @ matrix), expected, atol=1e-12)
     np.testing.assert_allclose(z.real @ matrix[:, ::4], z.real, atol=1e-12)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(2, 40), st.integers(0, 2**32 - 1))
+def test_periodic_lerp_is_numpy_periodic_interp(m, seed) -> None:
+    """One search for both tables, around the circle: `np.interp(..., period=2 pi)` to rounding, at any angle,
+    at the table's own angles and at the seam (+-pi)."""
+    rng = np.random.default_rng(seed)
+    theta = np.sort(rng.uniform(-np.pi, np.pi, m))
+    table = rng.normal(size=(2, m))
+    phi = np.concatenate([rng.uniform(-np.pi, np.pi, 200), theta, [-np.pi, np.pi]]).astype(np.float32)
+    got = periodic_lerp(phi, theta, table)
+    for k in range(2):
+        np.testing.assert_allclose(got[k], np.interp(phi, theta, table[k], period=2 * np.pi), rtol=1e-12, atol=1e-12)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.integers(-50, 400), st.integers(1, 60), st.floats(-100, 500), st.floats(0, 80))
+def test_sub_slices_are_the_pixels_within_reach(first, n, centre, half) -> None:
+    """`_sub`'s slices hold exactly the pixels of consecutive coordinates within `half` of the centre (the
+    definition it replaced: `np.nonzero(abs(x - centre) <= half)`), in both directions; None when there are none
+    or the centre is not finite."""
+    x = np.arange(first, first + n, dtype=np.float32)
+    y = x[:, None]
+    got = _sub(x, y, np.array([centre, centre]), half)
+    want = np.nonzero(np.abs(x - centre) <= half)[0]
+    if not len(want):
+        assert got is None
+    else:
+        assert got is not None
+        assert list(range(n))[got[1]] == list(want) == list(range(n))[got[0]]
+    assert _sub(x, y, np.array([np.nan, centre]), half) is None
+
+
+def test_clip_unit_is_np_clip_in_place() -> None:
+    values = np.array([-np.inf, -1.0, 0.0, 0.25, 1.0, 3.0, np.inf, np.nan], np.float32)
+    want = np.clip(values, 0.0, 1.0)
+    got = clip_unit(values)
+    assert got is values
+    np.testing.assert_array_equal(got, want)
 
 
 def test_limbus_is_the_projected_corneal_edge(guestrin):

@@ -125,13 +125,13 @@ def outline_from_rows(rows: np.ndarray, layout: ChannelLayout, sensor_px: tuple[
     """An `EyeOutline` (n,) of channel rows (n, C) of `layout`, with the glints of the first `leds` LEDs (lit)."""
     rows = np.atleast_2d(np.asarray(rows, float))
     n, leds = len(rows), layout.n_leds if leds is None else leds
-    centre = rows[:, 0:2]
-    axes, angle = ellipse_from_moments(np.nan_to_num(rows[:, 2:PUPIL_CHANNELS]))
+    centre, limbus = rows[:, 0:2], rows[:, layout.limbus]
+    both_axes, both_angles = ellipse_from_moments(np.nan_to_num(np.stack([rows[:, 2:PUPIL_CHANNELS], limbus[:, 2:]],
+                                                                        axis=1)))  # pupil, limbus (n, 2, ...)
+    (axes, limbus_axes), (angle, limbus_angle) = both_axes.transpose(1, 0, 2), both_angles.T
     glints = rows[:, PUPIL_CHANNELS:layout.features].reshape(n, layout.n_leds, 2)[:, :leds]
     points = rows[:, layout.pupil_points].reshape(n, layout.n_points, 2)
     theta, r, dr = pupil_polar(points, np.isfinite(points).all(-1), centre, axes, angle)
-    limbus = rows[:, layout.limbus]
-    limbus_axes, limbus_angle = ellipse_from_moments(np.nan_to_num(limbus[:, 2:]))
     return EyeOutline(
         pupil_centre_px=centre, pupil_axes_px=axes, pupil_angle_deg=angle,
         pupil_valid=np.isfinite(rows[:, :PUPIL_CHANNELS]).all(-1), pupil_points_px=points, pupil_theta=theta,

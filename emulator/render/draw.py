@@ -14,13 +14,14 @@ anti-aliased strokes from the upper margin. Only the bounding boxes of the featu
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 from scipy.special import erf
 
-from eyehil.emulator.render.geometry import EyeOutline, aperture_coverage
+from eyehil.emulator.render.geometry import EyeOutline, aperture_coverage, clip_unit
 from eyehil.emulator.render.noise import Noise, generator_of
 
 Box = tuple[int, int, int, int]  # canvas rows [r0, r1), columns [c0, c1)
@@ -46,11 +47,12 @@ class Levels:
 def box_of(x_lo: float, x_hi: float, y_lo: float, y_hi: float, origin: tuple[int, int], size: tuple[int, int],
            margin: float = 2.0) -> Box | None:
     """Canvas box covering sensor px [x_lo, x_hi] x [y_lo, y_hi] plus `margin`, or None if off the canvas."""
-    if not np.all(np.isfinite([x_lo, x_hi, y_lo, y_hi])):
+    x_lo, x_hi, y_lo, y_hi = float(x_lo), float(x_hi), float(y_lo), float(y_hi)
+    if not (math.isfinite(x_lo) and math.isfinite(x_hi) and math.isfinite(y_lo) and math.isfinite(y_hi)):
         return None
     (x0, y0), (w, h) = origin, size
-    c0, c1 = max(int(np.floor(x_lo - margin)) - x0, 0), min(int(np.ceil(x_hi + margin)) - x0 + 1, w)
-    r0, r1 = max(int(np.floor(y_lo - margin)) - y0, 0), min(int(np.ceil(y_hi + margin)) - y0 + 1, h)
+    c0, c1 = max(math.floor(x_lo - margin) - x0, 0), min(math.ceil(x_hi + margin) - x0 + 1, w)
+    r0, r1 = max(math.floor(y_lo - margin) - y0, 0), min(math.ceil(y_hi + margin) - y0 + 1, h)
     return (r0, r1, c0, c1) if r1 > r0 and c1 > c0 else None
 
 
@@ -83,12 +85,20 @@ def draw_eye(canvas: np.ndarray, origin: tuple[int, int], o: EyeOutline, levels:
 
 
 def _sub(x: np.ndarray, y: np.ndarray, centre: np.ndarray, half: float) -> tuple[slice, slice] | None:
-    """Row and column slices of the region whose pixels lie within `half` px of `centre`."""
-    cols = np.nonzero(np.abs(x - centre[0]) <= half)[0]
-    rows = np.nonzero(np.abs(y[:, 0] - centre[1]) <= half)[0]
-    if not (len(cols) and len(rows)) or not np.isfinite(half):
+    """Row and column slices of the region whose pixels lie within `half` px of `centre`; x (W,) and y (H, 1) are
+    consecutive pixel coordinates (steps of 1 px)."""
+    cx, cy, half = float(centre[0]), float(centre[1]), float(half)
+    if not (math.isfinite(cx) and math.isfinite(cy) and math.isfinite(half)):
         return None
-    return slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1)
+    cols = _within(float(x[0]), len(x), cx, half)
+    rows = _within(float(y[0, 0]), len(y), cy, half)
+    return None if cols is None or rows is None else (rows, cols)
+
+
+def _within(first: float, n: int, centre: float, half: float) -> slice | None:
+    """The indices j in [0, n) with |first + j - centre| <= half, as a slice (None if there are none)."""
+    lo, hi = max(math.ceil(centre - half - first), 0), min(math.floor(centre + half - first), n - 1)
+    return slice(lo, hi + 1) if lo <= hi else None
 
 
 def _draw_limbus(region, aperture, x, y, o: EyeOutline, levels: Levels):
@@ -125,7 +135,7 @@ def ellipse_coverage(x: np.ndarray, y: np.ndarray, centre: np.ndarray, axes: np.
     f = np.sqrt(u * u + v * v)
     grad = np.sqrt(np.square(u / a) + np.square(v / b))
     distance = (f - 1.0) * f / np.maximum(grad, 1e-9)
-    return np.clip(0.5 - distance, 0.0, 1.0, out=distance)
+    return clip_unit(np.subtract(0.5, distance, out=distance))
 
 
 def polar_coverage(x, y, centre, theta, r, dr) -> np.ndarray:
@@ -133,18 +143,32 @@ def polar_coverage(x, y, centre, theta, r, dr) -> np.ndarray:
 
     Signed distance (rho - r(theta)) r / sqrt(r^2 + r'^2): the radial excess times the cosine between the
     radial direction and the outline's normal; evaluated only in the annulus min(r) - 1 <= rho <= max(r) + 1
-    (1 inside it, 0 outside)."""
+    (1 inside it, 0 outside). r and r' are interpolated linearly between the sorted angles `theta`, around the
+    circle (`periodic_lerp`)."""
     dx, dy = (x - centre[0]).astype(np.float32), (y - centre[1]).astype(np.float32)
     rho = np.sqrt(dx * dx + dy * dy)
-    cover = (rho < np.min(r)).astype(np.float32)
-    edge = np.nonzero((rho >= np.min(r) - 1.0) & (rho <= np.max(r) + 1.0))
-    ex, ey = np.broadcast_to(dx, rho.shape)[edge], np.broadcast_to(dy, rho.shape)[edge]
-    phi = np.arctan2(ey, ex)
-    radius = np.interp(phi, theta, r, period=2.0 * np.pi)
-    slope = np.interp(phi, theta, dr, period=2.0 * np.pi)
-    distance = (rho[edge] - radius) * radius / np.sqrt(radius**2 + slope**2)
-    cover[edge] = np.clip(0.5 - distance, 0.0, 1.0)
+    r_in, r_out = float(np.min(r)), float(np.max(r))
+    cover = (rho < r_in).astype(np.float32)
+    rows, cols = np.nonzero((rho >= r_in - 1.0) & (rho <= r_out + 1.0))
+    phi = np.arctan2(dy[rows, 0], dx[cols])
+    radius, slope = periodic_lerp(phi, theta, np.stack([r, dr]))
+    distance = (rho[rows, cols] - radius) * radius / np.sqrt(radius**2 + slope**2)
+    cover[rows, cols] = clip_unit(0.5 - distance)
     return cover
+
+
+def periodic_lerp(phi: np.ndarray, theta: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """The rows of `table` (k, m), given at the ascending angles `theta` (m,) rad within one turn, interpolated
+    linearly at `phi` (...,) rad in [-pi, pi] and around the circle (`np.interp` with period 2 pi, one search for
+    all rows): (k, ...)."""
+    turn = 2.0 * np.pi
+    angles = np.concatenate(([theta[-1] - turn], theta, [theta[0] + turn]))
+    values = np.concatenate((table[:, -1:], table, table[:, :1]), axis=1)
+    upper = np.minimum(np.maximum(np.searchsorted(angles, phi, side="right"), 1), len(angles) - 1)
+    start, span = angles[upper - 1], angles[upper] - angles[upper - 1]
+    weight = (phi - start) / np.where(span > 0, span, np.inf)
+    low = values[:, upper - 1]
+    return low + weight * (values[:, upper] - low)
 
 
 def _draw_glints(region, aperture, x, y, o: EyeOutline, levels: Levels) -> None:

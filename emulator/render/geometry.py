@@ -191,13 +191,15 @@ def pupil_polar(points: np.ndarray, valid: np.ndarray, centre: np.ndarray, axes:
     upsample = _upsampler(points.shape[-2], m)  # (n, m)
     flat = np.nan_to_num(points)
     x, y = flat[..., 0] @ upsample, flat[..., 1] @ upsample
-    t = 2.0 * np.pi * np.arange(m) / m
-    a, b, phi = axes[..., 0:1] / 2, axes[..., 1:2] / 2, np.radians(angle_deg)[..., None]
-    ex, ey = a * np.cos(t), b * np.sin(t)
-    c, s = np.cos(phi), np.sin(phi)
+    dx, dy = x - centre[..., 0:1], y - centre[..., 1:2]
     traced = np.all(valid, axis=-1, keepdims=True)
-    dx = np.where(traced, x - centre[..., 0:1], ex * c - ey * s)
-    dy = np.where(traced, y - centre[..., 1:2], ex * s + ey * c)
+    if not traced.all():  # the ellipse where the outline is not whole
+        cos_t, sin_t = _circle(m)
+        a, b, phi = axes[..., 0:1] / 2, axes[..., 1:2] / 2, np.radians(angle_deg)[..., None]
+        ex, ey = a * cos_t, b * sin_t
+        c, s = np.cos(phi), np.sin(phi)
+        dx = np.where(traced, dx, ex * c - ey * s)
+        dy = np.where(traced, dy, ex * s + ey * c)
     theta = np.arctan2(np.nan_to_num(dy), np.nan_to_num(dx))
     order = np.argsort(theta, axis=-1)
     theta = np.take_along_axis(theta, order, axis=-1)
@@ -209,6 +211,16 @@ def pupil_polar(points: np.ndarray, valid: np.ndarray, centre: np.ndarray, axes:
     span = np.mod(step[0], 2.0 * np.pi)
     dr = step[1] / np.where(span > 0, span, np.inf)
     return theta, r, dr
+
+
+@functools.lru_cache(maxsize=8)
+def _circle(m: int) -> tuple[np.ndarray, np.ndarray]:
+    """cos and sin of m evenly spaced angles 2 pi k / m (read-only)."""
+    t = 2.0 * np.pi * np.arange(m) / m
+    out = np.cos(t), np.sin(t)
+    for a in out:
+        a.setflags(write=False)
+    return out
 
 
 @functools.lru_cache(maxsize=8)
@@ -231,7 +243,15 @@ def _upsampler(n: int, m: int) -> np.ndarray:
 
 def aperture_coverage(x: np.ndarray, y: np.ndarray, upper: np.ndarray, lower: np.ndarray) -> np.ndarray:
     """Fraction (0..1) of each pixel between the lids: 0.5 + `aperture_distance`, clipped."""
-    return np.clip(0.5 + aperture_distance(x, y, upper, lower), 0.0, 1.0)
+    distance = aperture_distance(x, y, upper, lower)
+    return clip_unit(np.add(distance, 0.5, out=distance))
+
+
+def clip_unit(values: np.ndarray) -> np.ndarray:
+    """`values` (an array) clipped to [0, 1] in place, NaN kept: `np.clip`'s values without its call overhead (a few
+    us, which counts where a frame draws a dozen small arrays)."""
+    np.maximum(values, 0.0, out=values)
+    return np.minimum(values, 1.0, out=values)
 
 
 def aperture_distance(x: np.ndarray, y: np.ndarray, upper: np.ndarray, lower: np.ndarray) -> np.ndarray:

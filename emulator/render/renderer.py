@@ -135,7 +135,7 @@ def roi_window(centre_px: np.ndarray, size: tuple[int, int], sensor_px: tuple[in
     if w > sw or h > sh:
         raise ValueError(f"region of interest {w}x{h} is larger than the sensor {sw}x{sh}")
     cx, cy = np.asarray(centre_px, float) if np.all(np.isfinite(centre_px)) else (sw / 2, sh / 2)
-    return int(np.clip(round(cx - w / 2), 0, sw - w)), int(np.clip(round(cy - h / 2), 0, sh - h))
+    return max(0, min(round(cx - w / 2), sw - w)), max(0, min(round(cy - h / 2), sh - h))
 
 
 def render_features(features: Features, eyes: EyeModel, scene: Scene, rng: Noise, *,
