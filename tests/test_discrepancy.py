@@ -459,12 +459,7 @@ def test_the_last_rounds_contenders_are_backfitted_in_its_place_and_the_best_kep
 
 
 def test_recordings_round_trip_and_a_hidden_effect_is_named_from_them(tmp_path, hidden_eyes) -> None:
-    hidden = effects.parse("pupil_change=-0.7")
-    evaluator = Evaluator("guestrin2006", hidden_eyes, base=[hidden], seed=5)
-    features = perturb(join_heads(list(evaluator.setup.cache.values()), evaluator.host), evaluator.base,
-                       np.random.default_rng(5), evaluator.setup.sensitivities)
-    for e in range(len(hidden_eyes)):
-        write_recording(tmp_path / f"s{e:02d}.jsonl", features, e, samples=2)
+    evaluator = _recorded(tmp_path, "guestrin2006", effects.parse("pupil_change=-0.7"), hidden_eyes)
     measured = load_recordings(tmp_path)
     assert measured.paired and len(measured.subjects) == len(hidden_eyes)
     np.testing.assert_allclose(measured.conditions["pgv_x:central"].values, evaluator.base_metrics["pgv_x:central"],
@@ -474,6 +469,70 @@ def test_recordings_round_trip_and_a_hidden_effect_is_named_from_them(tmp_path, 
                              workers=2)
     assert result.outcome == "explained" and [a.effect.name for a in result.named] == ["pupil_change"]
     assert result.rounds[0].added.values["delta_diameter_mm"] == pytest.approx(-0.7, abs=0.1)
+
+
+def _recorded(folder, experiment: str, hidden, eyes, seed: int = 5):
+    """Eyes with a hidden effect, simulated as the workflow simulates them, written as one recording each; and the
+    evaluator whose base metrics they must reproduce."""
+    evaluator = Evaluator(experiment, eyes, base=[hidden], seed=seed)
+    features = perturb(join_heads(list(evaluator.setup.cache.values()), evaluator.host), evaluator.base,
+                       np.random.default_rng(seed), evaluator.setup.sensitivities)
+    for e in range(len(eyes)):
+        write_recording(folder / f"s{e:02d}.jsonl", features, e, samples=2)
+    return evaluator
+
+
+def test_blignaut_recordings_of_both_eyes_round_trip_and_a_hidden_effect_is_named_from_them(tmp_path,
+                                                                                           hidden_eyes) -> None:
+    """Blignaut 2014 recordings (both eyes, 135 targets) give the experiment's conditions exactly, the experiment
+    named by the recordings' scene; the workflow names a hidden lens distortion from them (model eyes a Rozema draw
+    of their own, as in the blind trials: the published eyes differ from the hidden eyes' population)."""
+    evaluator = _recorded(tmp_path, "blignaut2014", effects.parse("lens_distortion=1.8"), hidden_eyes)
+    measured = load_recordings(tmp_path)  # no experiment given: the headers' scene says blignaut2014
+    assert measured.experiment == "blignaut2014" and measured.paired and len(measured.subjects) == len(hidden_eyes)
+    assert {"C5", "C135", "pgv_x:central", "spacing_sd:central"} <= set(measured.conditions)
+    for name, condition in measured.conditions.items():  # the best function of each configuration included
+        np.testing.assert_allclose(condition.values, evaluator.base_metrics[name], rtol=1e-12, atol=1e-12)
+    model = sample(12, np.random.default_rng(99)).eyes
+    result = run_discrepancy(measured, eyes=model, effect_names=CANDIDATES, rounds=1, workers=2)
+    assert result.outcome == "explained" and [a.effect.name for a in result.named] == ["lens_distortion"]
+    assert result.rounds[0].added.values["k1"] == pytest.approx(1.8, abs=0.3)
+
+
+def test_a_folder_of_recordings_names_one_experiment_or_is_refused(tmp_path, hidden_eyes) -> None:
+    guestrin, blignaut, other = (tmp_path / n for n in ("g", "b", "mixed"))
+    for folder in (guestrin, blignaut, other):
+        folder.mkdir()
+    _recorded(guestrin, "guestrin2006", effects.parse("pupil_change=-0.7"), hidden_eyes[:3])
+    _recorded(blignaut, "blignaut2014", effects.parse("feature_noise=0.1"), hidden_eyes[:3])
+    assert load_recordings(guestrin).experiment == "guestrin2006"
+    out = tmp_path / "report"
+    assert main(["discrepancy", "--measured", str(blignaut), "--search-eyes", "3", "--eyes", "3", "--effects",
+                 "feature_noise", "--rounds", "1", "--workers", "1", "--quiet", "--out", str(out)]) == 0
+    result = json.loads((out / "result.json").read_text())
+    assert result["settings"]["experiment"] == "blignaut2014" and result["source"] == f"recordings in {blignaut}"
+    with pytest.raises(ValueError, match="recorded in scene 'guestrin2006', expected 'blignaut2014'"):
+        load_recordings(guestrin, "blignaut2014")
+    (other / "a.jsonl").write_bytes((guestrin / "s00.jsonl").read_bytes())
+    (other / "b.jsonl").write_bytes((blignaut / "s00.jsonl").read_bytes())
+    with pytest.raises(ValueError, match="recordings of different scenes: blignaut2014, guestrin2006"):
+        load_recordings(other)
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    for path in blignaut.iterdir():
+        (elsewhere / path.name).write_text(path.read_text().replace('"scene": "blignaut2014"', '"scene": "somewhere"'))
+    with pytest.raises(ValueError, match="recordings of scene 'somewhere': the discrepancy experiments run in"):
+        load_recordings(elsewhere)
+    lines = (blignaut / "s01.jsonl").read_text().splitlines()
+    one_eyed = []  # the same recording with the left eye's records taken out
+    for line in lines:
+        record = json.loads(line)
+        if record.get("type") == "sample":
+            record["eyes"] = [e for e in record["eyes"] if e["eye"] == 0]
+        one_eyed.append(json.dumps(record))
+    (blignaut / "s01.jsonl").write_text("\n".join(one_eyed) + "\n")
+    with pytest.raises(ValueError, match="no left eye recorded; scene 'blignaut2014' tracks right and left"):
+        load_recordings(blignaut)
 
 
 def test_cli_writes_the_report_and_reports_progress(tmp_path, capsys) -> None:

@@ -2,10 +2,11 @@
 and show the gap shrink (analysis/discrepancy/workflow.py; docs/discrepancy.md).
 
 Measured data: a built-in real data set (guestrin2006, the default: Guestrin & Eizenman 2006's 4 subjects;
-blignaut2014: Blignaut 2014's best-function means), a file in the eyehil.measured/1 JSON format, or
---hidden EFFECT=VALUE: data simulated on other eyes (a Rozema 2011 draw) with an effect the workflow is not
-told about. Writes summary.json, result.json, measured.json, report.md and discrepancy.png into --out.
-Progress of every stage goes to stderr (--quiet: none).
+blignaut2014: Blignaut 2014's best-function means), a file in the eyehil.measured/1 JSON format, a folder of
+eyehil recordings (one *.jsonl per subject, compared at the gaze-error and the feature level; either experiment,
+named by the recordings' "scene" or --experiment), or --hidden EFFECT=VALUE: data simulated on other eyes (a
+Rozema 2011 draw) with an effect the workflow is not told about. Writes summary.json, result.json, measured.json,
+report.md and discrepancy.png into --out. Progress of every stage goes to stderr (--quiet: none).
 """
 
 from __future__ import annotations
@@ -20,10 +21,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     src = p.add_mutually_exclusive_group()
     src.add_argument("--measured", default=None, metavar="FILE|NAME",
-                     help="measured data: guestrin2006 (default), blignaut2014, or a JSON file")
+                     help="measured data: guestrin2006 (default), blignaut2014, a JSON file, or a folder of "
+                          "recordings (one *.jsonl per subject)")
     src.add_argument("--hidden", action="append", default=None, metavar="EFFECT=VALUE",
                      help="simulate measured data with this effect, e.g. pupil_change=-0.7 (repeatable)")
-    p.add_argument("--experiment", default="guestrin2006", help="experiment of --hidden data (default guestrin2006)")
+    p.add_argument("--experiment", default=None, help="experiment of --hidden data (default guestrin2006) or of a "
+                   "folder of recordings (default: the scene their headers name, else guestrin2006)")
     p.add_argument("--out", default="discrepancy", help="output folder (default ./discrepancy)")
     p.add_argument("--eyes", default="published", help="model eyes: published (default) | sample:N | N")
     p.add_argument("--search-eyes", type=int, default=20, help="eyes used in the search (first N; default 20)")
@@ -46,12 +49,12 @@ def _measured(args: argparse.Namespace):
     from eyehil.emulator.eye.population import sample
 
     if not args.hidden:
-        return measured_from_spec(args.measured or "guestrin2006")
+        return measured_from_spec(args.measured or "guestrin2006", args.experiment)
     import numpy as np
 
     hidden = [parse(h) for h in args.hidden]
     eyes = sample(args.hidden_eyes, np.random.default_rng(args.hidden_seed)).eyes
-    return hidden_measured(hidden, eyes=eyes, experiment=args.experiment, seed=args.hidden_seed)
+    return hidden_measured(hidden, eyes=eyes, experiment=args.experiment or "guestrin2006", seed=args.hidden_seed)
 
 
 def _check(args: argparse.Namespace) -> None:

@@ -7,34 +7,65 @@ recordings (`recording`) into per-subject conditions of the experiment (`metrics
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
 from eyehil.analysis.discrepancy.data import BUILTIN, Measured, MeasuredCondition, load
+from eyehil.analysis.discrepancy.metrics import EXPERIMENTS
 from eyehil.analysis.discrepancy.metrics import experiment as get_experiment
 from eyehil.analysis.discrepancy.recording import feature_conditions, recorded_features
 from eyehil.emulator.scene import load_scene
 
 
-def measured_from_spec(spec: str) -> Measured:
+def measured_from_spec(spec: str, experiment: str | None = None) -> Measured:
     """A built-in data set by name (guestrin2006, blignaut2014), a folder of recordings (one *.jsonl per
-    subject, `eyehil.analysis.discrepancy.recording`) or a measured-data file path."""
+    subject, `eyehil.analysis.discrepancy.recording`; of `experiment`, default the one whose scene the recordings
+    name) or a measured-data file path."""
     if spec in BUILTIN:
         return BUILTIN[spec]()
     if Path(spec).is_dir():
-        return load_recordings(spec)
+        return load_recordings(spec, experiment)
     return load(spec)
 
 
-def measured_from_recordings(paths: Sequence[str | Path], experiment: str = "guestrin2006",
+def recordings_experiment(paths: Sequence[str | Path]) -> str:
+    """The experiment whose scene the recordings' headers name (`"scene"`), guestrin2006 if none names one;
+    ValueError if they name different scenes, or a scene no experiment runs in."""
+    by_scene = {cls.scene: name for name, cls in EXPERIMENTS.items()}
+    scenes = {_header(path).get("scene") for path in paths} - {None}
+    if len(scenes) > 1:
+        raise ValueError(f"recordings of different scenes: {', '.join(sorted(map(str, scenes)))}")
+    if not scenes:
+        return "guestrin2006"
+    scene = scenes.pop()
+    if scene not in by_scene:
+        raise ValueError(f"recordings of scene {scene!r}: the discrepancy experiments run in "
+                         f"{', '.join(sorted(by_scene))}")
+    return by_scene[scene]
+
+
+def _header(path: str | Path) -> dict:
+    """A recording's first line as a dict ({} if it is not a JSON object: `read_recording` reports that later)."""
+    with open(path, encoding="utf-8", errors="replace") as f:
+        line = f.readline(1 << 20)
+    try:
+        header = json.loads(line)
+    except ValueError:
+        return {}
+    return header if isinstance(header, dict) else {}
+
+
+def measured_from_recordings(paths: Sequence[str | Path], experiment: str | None = None,
                              source: str = "") -> Measured:
-    """Per-subject gaze and feature conditions of recordings (one per subject), paired by subject."""
-    if experiment != "guestrin2006":
-        raise ValueError("recordings are supported for the guestrin2006 experiment only")
+    """Per-subject gaze and feature conditions of recordings (one per subject), paired by subject; `experiment`
+    (default: `recordings_experiment`) says which conditions: its diagnostic ones (Guestrin 2006's errors per head
+    position, Blignaut 2014's per calibration configuration) and the feature conditions of the right eye."""
     if len(paths) < 2:
         raise ValueError("measured recordings: at least 2 subjects")
+    experiment = experiment or recordings_experiment(paths)
     exp = get_experiment(experiment)
     scene = load_scene(exp.scene)
     features = recorded_features(paths, scene)
@@ -49,8 +80,9 @@ def measured_from_recordings(paths: Sequence[str | Path], experiment: str = "gue
     return Measured(experiment, data, subjects, source or f"{len(subjects)} recordings", {})
 
 
-def load_recordings(folder: str | Path, experiment: str = "guestrin2006") -> Measured:
-    """Every *.jsonl recording in `folder` (sorted by name), one per subject."""
+def load_recordings(folder: str | Path, experiment: str | None = None) -> Measured:
+    """Every *.jsonl recording in `folder` (sorted by name), one per subject, of `experiment` (default: the one
+    their headers' scene names, `recordings_experiment`)."""
     paths = sorted(Path(folder).glob("*.jsonl"))
     if not paths:
         raise FileNotFoundError(f"no *.jsonl recordings in {folder}")

@@ -4,10 +4,10 @@ into per-subject conditions at the feature level and at the gaze-error level.
 Convention (the recording format lets writers add keys; readers ignore unknown ones): one recording per
 subject; the header's `"scene"` names the scene preset (default: the experiment's); target record
 `target_id` = h * T + t for head position h and target t of that scene (so the head position of every
-sample is known from its target label); `label` is free text ("<head name>/<t>"). Samples whose pupil
-flag has DETECTED and every glint VALID count; a fixation's features are the mean over its samples (the
-emulator's features are fixation means too). Only the one-eye Guestrin 2006 experiment is supported
-(recordings of the right eye).
+sample is known from its target label); `label` is free text ("<head name>/<t>"). A sample holds a record of
+every eye the scene tracks (`"eye"` 0 right, 1 left: Guestrin 2006 the right eye, Blignaut 2014 both). Per eye,
+samples whose pupil flag has DETECTED and every glint VALID count; a fixation's features are the mean over its
+samples (the emulator's features are fixation means too).
 
 Feature conditions (`feature_conditions`, per eye and head position <h>, px; every head position other
 than the first is compared within subjects to the first, like the gaze conditions):
@@ -44,10 +44,12 @@ import numpy as np
 from eyehil.drivers.recording import FORMAT, VERSION, read_recording
 from eyehil.emulator.features import Features, empty_features
 from eyehil.emulator.scene import Scene, load_scene
+from eyehil.protocols.enums import Eye
 
 QUANTITIES = ("pgv_x", "pgv_y", "gain_x", "gain_y", "glint_spacing", "pupil_major", "pupil_ratio", "spacing_sd",
               "spacing_perp_sd", "pgv_sd")
 DETECTED, GLINT_VALID = 0x01, 0x01
+EYE_IDS = {"right": int(Eye.RIGHT), "left": int(Eye.LEFT)}  # a side's `"eye"` in a recording's eye records
 
 
 def feature_conditions(features: Features, side: str = "right") -> dict[str, np.ndarray]:
@@ -120,8 +122,9 @@ def feature_reference(condition: str, first_head: str = "central") -> str | None
 
 def write_recording(path: str | Path, features: Features, eye: int, *, samples: int = 3,
                     frame_noise_px: float = 0.0, rng: np.random.Generator | None = None) -> Path:
-    """Eye `eye` of simulated `features` as a recording (the convention above); each fixation becomes
-    `samples` samples with independent Gaussian noise of `frame_noise_px` on every centre."""
+    """Eye `eye` of simulated `features` as a recording (the convention above), every side the features hold (an
+    eye record each); each fixation becomes `samples` samples with independent Gaussian noise of `frame_noise_px`
+    on every centre."""
     path = Path(path)
     scene = load_scene(features.scene)
     rng = rng or np.random.default_rng(0)
@@ -138,29 +141,34 @@ def write_recording(path: str | Path, features: Features, eye: int, *, samples: 
             lines.append({"type": "target", "host_us": clock, "device_us": clock, "target_id": h * T + t,
                           "x_mm": float(w / 2 - target[0]), "y_mm": float(h_mm / 2 - target[1]), "visible": True,
                           "label": f"{getattr(features.head_positions[h], 'name', h)}/{t}"})
-            ok = bool(features.valid[eye, 0, h, t])
             for _ in range(samples):
                 clock += 4000
                 seq += 1
-                centre = features.pupil_centre_px[eye, 0, h, t] + frame_noise_px * rng.standard_normal(2)
-                glints = features.glint_px[eye, 0, h, t] + frame_noise_px * rng.standard_normal((len(scene.leds), 2))
-                axes = features.pupil_axes_px[eye, 0, h, t]
-                eye_rec = {"eye": 0, "flags": DETECTED if ok else 0,
-                           "centre": [float(v) for v in np.nan_to_num(centre)],
-                           "axes": [float(v) for v in np.nan_to_num(axes)],
-                           "angle_deg": float(np.nan_to_num(features.pupil_angle_deg[eye, 0, h, t])),
-                           "confidence": 1.0 if ok else 0.0,
-                           "glints": [{"led": k, "flags": GLINT_VALID if ok else 0, "x": float(np.nan_to_num(g[0])),
-                                       "y": float(np.nan_to_num(g[1]))} for k, g in enumerate(glints)]}
+                records = [_eye_record(features, (eye, s, h, t), EYE_IDS[side], frame_noise_px, rng)
+                           for s, side in enumerate(features.sides)]
                 lines.append({"type": "sample", "seq": seq, "frame_id": seq, "device_us": clock, "host_us": clock,
-                              "lost_before": 0, "skipped_before": 0, "target_id": h * T + t, "eyes": [eye_rec]})
+                              "lost_before": 0, "skipped_before": 0, "target_id": h * T + t, "eyes": records})
     lines.append({"type": "end", "host_us": clock, "samples": seq, "stats": {}, "status": None})
     path.write_text("".join(json.dumps(x) + "\n" for x in lines), encoding="utf-8")
     return path
 
 
+def _eye_record(features: Features, at: tuple[int, int, int, int], eye_id: int, noise_px: float,
+                rng: np.random.Generator) -> dict:
+    """The recording's record of one eye of one sample: fixation `at` (eye, side, head, target) of `features`, with
+    Gaussian noise of `noise_px` on every centre."""
+    ok = bool(features.valid[at])
+    centre = features.pupil_centre_px[at] + noise_px * rng.standard_normal(2)
+    glints = features.glint_px[at] + noise_px * rng.standard_normal((features.glint_px.shape[-2], 2))
+    return {"eye": eye_id, "flags": DETECTED if ok else 0, "centre": [float(v) for v in np.nan_to_num(centre)],
+            "axes": [float(v) for v in np.nan_to_num(features.pupil_axes_px[at])],
+            "angle_deg": float(np.nan_to_num(features.pupil_angle_deg[at])), "confidence": 1.0 if ok else 0.0,
+            "glints": [{"led": k, "flags": GLINT_VALID if ok else 0, "x": float(np.nan_to_num(g[0])),
+                        "y": float(np.nan_to_num(g[1]))} for k, g in enumerate(glints)]}
+
+
 def recorded_features(paths: Sequence[str | Path], scene: Scene) -> Features:
-    """Fixation-mean features (E = one per recording, S = 1 right eye, H, T) of recordings of `scene`."""
+    """Fixation-mean features (E = one per recording, every side `scene` tracks, H, T) of recordings of `scene`."""
     H, T, L = len(scene.head_positions), len(scene.targets()), len(scene.leds)
     out = empty_features(len(paths), scene, tuple(scene.head_positions), T, 1, scene.targets(), "recorded")
     for e, path in enumerate(paths):
@@ -171,20 +179,28 @@ def recorded_features(paths: Sequence[str | Path], scene: Scene) -> Features:
             raise ValueError(f"{path}: no samples")
         if rec.glints.shape[2] < L:
             raise ValueError(f"{path}: {rec.glints.shape[2]} glints per sample, the scene has {L} LEDs")
-        good = (rec.pupil_flags[:, 0] & DETECTED).astype(bool) & np.all(
-            (rec.glint_flags[:, 0, :L] & GLINT_VALID).astype(bool), axis=-1)
         ids = rec.target_id
         if np.any(ids >= H * T):
             raise ValueError(f"{path}: target_id beyond the scene's {H} x {T} fixations")
-        for fix in range(H * T):
-            m = good & (ids == fix)
-            if not np.any(m):
-                continue
-            h, t = divmod(fix, T)
-            out.arrays["pupil_centre_px"][e, 0, h, t] = rec.centre[m, 0].mean(axis=0)
-            out.arrays["pupil_axes_px"][e, 0, h, t] = rec.axes[m, 0].mean(axis=0)
-            out.arrays["glint_px"][e, 0, h, t] = rec.glints[m, 0, :L].mean(axis=0)
-            out.arrays["pupil_valid"][e, 0, h, t] = True
-            out.arrays["glint_valid"][e, 0, h, t] = True
-            out.arrays["fixation_valid"][e, 0, h, t] = True
+        for s, side in enumerate(scene.sides):
+            column = np.nonzero(rec.eyes == EYE_IDS[side])[0]
+            if not len(column):
+                raise ValueError(f"{path}: no {side} eye recorded; scene {scene.name!r} tracks "
+                                 f"{' and '.join(scene.sides)}")
+            j = int(column[0])
+            good = (rec.pupil_flags[:, j] & DETECTED).astype(bool) & np.all(
+                (rec.glint_flags[:, j, :L] & GLINT_VALID).astype(bool), axis=-1) & (ids >= 0)
+            fixation = ids[good]
+            count = np.bincount(fixation, minlength=H * T).reshape(H, T)
+            seen = count > 0
+            for name, values in (("pupil_centre_px", rec.centre[:, j]), ("pupil_axes_px", rec.axes[:, j]),
+                                 ("glint_px", rec.glints[:, j, :L])):
+                sums = np.zeros((H * T, *values.shape[1:]))
+                np.add.at(sums, fixation, values[good])
+                means = sums.reshape(H, T, *values.shape[1:]) / np.maximum(count, 1).reshape(
+                    H, T, *([1] * (values.ndim - 1)))
+                out.arrays[name][e, s][seen] = means[seen]
+            for name in ("pupil_valid", "glint_valid", "fixation_valid"):  # glint_valid has one per LED
+                flags = out.arrays[name][e, s]
+                flags[...] = seen.reshape(H, T, *([1] * (flags.ndim - 2)))
     return out
