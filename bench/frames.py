@@ -24,6 +24,7 @@ a second, with most of both cores idle: the chain is bound by the hand-offs, not
 from __future__ import annotations
 
 import os
+import select
 import subprocess
 import sys
 import time
@@ -42,6 +43,7 @@ LINKS = ("pty", "tcp")
 RATE_HZ = 100
 SECONDS = 2.0
 TARGET_FPS = {"pty": 1000.0, "tcp": 2000.0}  # issue 16
+WRITER_START_S = 30.0  # `terminal_ceiling`: how long its writer process may take to start (a busy machine)
 #: (label, link, extra `eyehil emulate` arguments); measured in turn within each repeat, so they share the load.
 CASES = (
     ("pty", "pty", ()),
@@ -104,8 +106,9 @@ def terminal_ceiling(seconds: float = SECONDS) -> float:
         try:
             writer.stdin.write(image)
             writer.stdin.close()
-            while not os.read(slave, 65536):  # the writer has started
-                pass
+            if not select.select([slave], [], [], WRITER_START_S)[0]:
+                raise RuntimeError(f"the pty writer sent nothing within {WRITER_START_S:.0f} s "
+                                   f"(exit status {writer.poll()})")
             received, start = 0, time.perf_counter()
             while time.perf_counter() - start < seconds:
                 received += len(os.read(slave, 65536))
