@@ -1,6 +1,7 @@
 """Run the benchmarks: `python -m bench` (all), `python -m bench forward study` (some), `--quick` (one repeat).
 
-Each benchmark module has `run(repeats) -> dict` and `report(results) -> str` and prints one line.
+Each benchmark module has `run(repeats) -> dict` and `report(results) -> str` and prints one line (stdout); which
+benchmark runs, and how long each took, goes to stderr.
 """
 
 from __future__ import annotations
@@ -9,6 +10,8 @@ import argparse
 import importlib
 import os
 import platform
+import sys
+import time
 
 BENCHMARKS = [
     "forward",
@@ -42,13 +45,17 @@ def main() -> int:
           f"{platform.machine()}; best of {repeats}")
     if args.eyes is not None and (args.eyes < 1 or set(args.names) != {"study"}):
         parser.error("--eyes goes with the study benchmark alone: python -m bench study --eyes 10000")
-    for name in args.names or BENCHMARKS:
+    names = args.names or BENCHMARKS
+    for i, name in enumerate(names, start=1):
+        start = time.perf_counter()
+        print(f"[{i}/{len(names)}] {name} ...", file=sys.stderr, flush=True)  # progress: the results go to stdout
         if args.eyes is not None:
             module = importlib.import_module("bench.study_scale")
             print(module.report(module.run(repeats, eyes=args.eyes)), flush=True)
-            continue
-        module = importlib.import_module(f"bench.{name}")
-        print(module.report(module.run(repeats)), flush=True)
+        else:
+            module = importlib.import_module(f"bench.{name}")
+            print(module.report(module.run(repeats)), flush=True)
+        print(f"[{i}/{len(names)}] {name} took {time.perf_counter() - start:.0f} s", file=sys.stderr, flush=True)
     return 0
 
 
