@@ -219,6 +219,44 @@ def test_a_fit_at_the_edge_of_its_range_is_flagged_and_not_added() -> None:
     assert fit.lowers() and not fit.passes()
 
 
+def test_a_fit_at_an_edge_does_not_hide_the_next_candidate(monkeypatch) -> None:
+    """The refined best ends at an edge (a lens distortion falling toward k1 = +3): one more wave refines the next
+    screened candidate, whose narrow bowl the 5-node screen barely sees (a head roll of 2 deg, D 30); the round adds
+    it and reports the edge fit as not added. Without the wave the head roll stays screened at D 95."""
+    from eyehil.analysis.discrepancy import search
+    from eyehil.analysis.discrepancy.workflow import choose
+
+    def landscape(batch):
+        out = []
+        for a in batch:
+            v = a.values
+            if a.effect.name == "lens_distortion":
+                d = 100.0 - 25.0 * max(v["k1"], 0.0)  # D 25 at the edge: below the head roll's 30
+            elif a.effect.name == "head_roll":
+                d = 100.0 - 70.0 * np.exp(-(((v["roll_deg"] - 2.0) / 1.2) ** 2))
+            else:
+                d = 99.0 + sum(abs(x) for x in v.values())
+            out.append({"D": np.array([d])})
+        return out
+
+    chosen = [effects.get(n) for n in ("lens_distortion", "head_roll", "feature_noise", "pupil_change")]
+
+    def fits() -> dict:
+        found = search_effects(chosen, landscape, lambda m: m["D"][:, 0], D0=100.0, n_conditions=40, top=1)
+        return {f.effect.name: f for f in found}
+
+    by = fits()
+    assert by["lens_distortion"].at_edge == ["k1"] and not by["lens_distortion"].screened
+    assert not by["head_roll"].screened and by["head_roll"].values["roll_deg"] == pytest.approx(2.0, abs=0.05)
+    assert by["feature_noise"].screened and by["pupil_change"].screened  # one wave more, not all
+    ranked = sorted(by.values(), key=lambda f: f.score)
+    round_ = choose(None, ranked)  # type: ignore[arg-type]
+    assert round_.added is by["head_roll"]
+    assert "lens_distortion(k1=3" in round_.verdict and "not added" in round_.verdict
+    monkeypatch.setattr(search, "EXTRA_WAVES", 0)
+    assert fits()["head_roll"].screened and fits()["head_roll"].D > 90
+
+
 def test_rivals_are_the_candidates_that_fit_as_well_as_the_added_effect() -> None:
     """D + 2k within 2 of the added fit's (and a significant drop of D): a rival; further: not."""
     from eyehil.analysis.discrepancy.search import EffectFit

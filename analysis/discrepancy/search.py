@@ -16,6 +16,10 @@ call (one batched calibration for every effect's points). Per effect, with P = 1
    window), it is repeated at the same h around the new best, up to `WALK` times per search, so that the
    quadratic below interpolates between points on both sides of the best instead of extrapolating from one side
    (a sharp, lopsided valley: a camera pose's yaw, whose one-sided parabola overshot by 0.08 deg, D 165 -> 218).
+   When the refined effect of lowest score ends at an edge of its range (below: it will not be added), the next
+   `TOP` screened effects are refined too (`EXTRA_WAVES` such waves at most): the screen's surrogate can underrate
+   an effect (a tilted cornea screened at D 59 refined to 15, where the decentred pupil ranked first ends at an
+   edge: gaze-error tables, blind single trial 18).
 3. A quadratic D(u) = c + g.u + u.H.u / 2 (u in units of the last h = step/16) fitted by least squares to
    the evaluated points within h of the best (2h or 4h if too few: at a bound); if H is positive definite
    its minimum (kept within that window and the range) is evaluated; the best evaluated point is the
@@ -61,6 +65,7 @@ REFINE = (2, 3, 4)  # refinement steps h = step / 2**r
 ZOOM, ZOOM_RATIO = 2, 4.0  # zoomed refinements at most, and when (module docstring, 3.)
 WALK = 2  # refinements repeated at the same h at most, while the best moves (module docstring, 2.)
 TOP = 3
+EXTRA_WAVES = 1  # waves of `TOP` more refinements when the refined best ends at an edge (module docstring, 2.)
 EDGE = 0.01
 
 Metrics = dict[str, np.ndarray]
@@ -332,6 +337,12 @@ def quadratic_minimum(points, Ds, best, h, lo, hi) -> tuple[np.ndarray | None, n
     return estimate, np.where(on_bound, np.nan, sigma)
 
 
+def _best_at_edge(searches: Sequence[EffectSearch]) -> bool:
+    """Whether the refined fit of lowest score ends at an edge of its range (`EffectFit.at_edge`)."""
+    refined = [s.result() for s in searches if s.stage > 0]
+    return bool(refined) and bool(min(refined, key=lambda f: f.score).at_edge)
+
+
 def max_evaluations(effect: Effect, refined: bool = True) -> int:
     """Evaluations of one effect's search at most: nodes, and if refined the surrogate optimum, the
     refinements and their walks, the quadratic's minimum and the zooms."""
@@ -346,18 +357,27 @@ def search_effects(effects: Sequence[Effect], evaluate: Callable[[list[Applied]]
     effect (one batch per stage), `score(conditions)` the D of each (conditions of P simulations, each (P, E), ->
     (P,): a batch's nodes and a surrogate grid are scored in one call); `progress(n)` after each batch."""
     searches = [EffectSearch(e, D0, n_conditions) for e in effects]
+    reserve: list[EffectSearch] = []  # screened out, best first: the next wave's
+    waves = 0
     while True:
         asks = [(s, s.ask()) for s in searches if s.ask() is not None]
         if not asks:
             waiting = [s for s in searches if s.screened and s.stage == 0]
-            if not waiting:
-                break
-            for s in sorted(waiting, key=lambda s: s.screen_score)[:top]:
-                s.continue_search()
-            for s in waiting:
-                if s.screened:
-                    s.stage = -1  # screened out: done
-            continue
+            if waiting:
+                ranked = sorted(waiting, key=lambda s: s.screen_score)
+                for s in ranked[:top]:
+                    s.continue_search()
+                for s in ranked[top:]:
+                    s.stage = -1  # screened out: done, unless the refined best ends at an edge
+                reserve = ranked[top:]
+                continue
+            if reserve and waves < EXTRA_WAVES and _best_at_edge(searches):
+                waves += 1
+                for s in reserve[:top]:
+                    s.continue_search()
+                reserve = reserve[top:]
+                continue
+            break
         batch = [Applied.of(s.effect, dict(zip((p.name for p in s.effect.fitted), map(float, row), strict=True)))
                  for s, pts in asks for row in pts]
         metrics = evaluate(batch)

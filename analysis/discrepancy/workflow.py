@@ -336,9 +336,12 @@ def _round(search: Evaluator, measured: Measured, effect_names, alpha, progress,
 
 
 def choose(before: Comparison, fits: list[EffectFit]) -> Round:
-    """Step 3 on a round's ranked fits: the best is added if it passes at the round's `add_level`."""
+    """Step 3 on a round's ranked fits: the best fit not at an edge of its range is added if it passes at the
+    round's `add_level` (a fit at an edge is evidence against its effect: it is reported, not added, and does not
+    stand in the way of the next)."""
     level = add_level(len(fits))
-    best = fits[0] if fits and fits[0].passes(level) else None
+    free = next((f for f in fits if not f.at_edge), None)
+    best = free if free is not None and free.passes(level) else None
     return Round(before, fits, best, _verdict(best, fits, level), level)
 
 
@@ -396,12 +399,15 @@ def _contend(initial: Evaluator, search: Evaluator, measured: Measured, last: Ro
 
 
 def _verdict(best: EffectFit | None, fits: list[EffectFit], level: float) -> str:
+    edged = [f for f in fits[:fits.index(best)] if f.at_edge] if best is not None else []
     if best is not None:
-        return f"added {best.applied.label()}: D {best.D0:.1f} -> {best.D:.1f}"
+        passed = "; ".join(f"{f.applied.label()} ends at the edge of its plausible range ({', '.join(f.at_edge)}): "
+                           "not added" for f in edged)
+        return (f"added {best.applied.label()}: D {best.D0:.1f} -> {best.D:.1f}" + (f" ({passed})" if passed else ""))
     if not fits:
         return "no candidate effect left"
-    top = fits[0]
-    if top.at_edge and top.lowers(level):
+    top = next((f for f in fits if not f.at_edge), fits[0])
+    if fits[0].at_edge and fits[0].lowers(level) and top is fits[0]:
         return (f"the best, {top.applied.label()}, ends at the edge of its plausible range ({', '.join(top.at_edge)}): "
                 "not added")
     return (f"the best, {top.applied.label()}, lowers D by {top.reduction:.2f}, "
