@@ -253,6 +253,9 @@ def test_a_fit_at_an_edge_does_not_hide_the_next_candidate(monkeypatch) -> None:
     round_ = choose(None, ranked)  # type: ignore[arg-type]
     assert round_.added is by["head_roll"]
     assert "lens_distortion(k1=3" in round_.verdict and "not added" in round_.verdict
+    refused = choose(None, [by["lens_distortion"], by["feature_noise"]])  # type: ignore[arg-type]
+    assert refused.added is None and refused.verdict.startswith("lens_distortion(k1=3) ends at the edge")
+    assert "; the best not at an edge, feature_noise(" in refused.verdict
     monkeypatch.setattr(search, "EXTRA_WAVES", 0)
     assert fits()["head_roll"].screened and fits()["head_roll"].D > 90
 

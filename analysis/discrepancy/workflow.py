@@ -399,20 +399,20 @@ def _contend(initial: Evaluator, search: Evaluator, measured: Measured, last: Ro
 
 
 def _verdict(best: EffectFit | None, fits: list[EffectFit], level: float) -> str:
-    edged = [f for f in fits[:fits.index(best)] if f.at_edge] if best is not None else []
-    if best is not None:
-        passed = "; ".join(f"{f.applied.label()} ends at the edge of its plausible range ({', '.join(f.at_edge)}): "
-                           "not added" for f in edged)
-        return (f"added {best.applied.label()}: D {best.D0:.1f} -> {best.D:.1f}" + (f" ({passed})" if passed else ""))
     if not fits:
         return "no candidate effect left"
-    top = next((f for f in fits if not f.at_edge), fits[0])
-    if fits[0].at_edge and fits[0].lowers(level) and top is fits[0]:
-        return (f"the best, {top.applied.label()}, ends at the edge of its plausible range ({', '.join(top.at_edge)}): "
-                "not added")
-    return (f"the best, {top.applied.label()}, lowers D by {top.reduction:.2f}, "
-            f"{top.reduction / top.scale**2:.2f} after the misfit scale (needs > {sps.chi2.ppf(level, top.k):.2f}, "
-            f"the chi-square({top.k}) point at {100 * level:.2f} %, Bonferroni over {len(fits)} candidates)")
+    top = best if best is not None else next((f for f in fits if not f.at_edge), None)
+    edged = [f for f in (fits if top is None else fits[:fits.index(top)]) if f.at_edge and f.lowers(level)]
+    edges = "; ".join(f"{f.applied.label()} ends at the edge of its plausible range ({', '.join(f.at_edge)}): "
+                      "not added" for f in edged)
+    if best is not None:
+        return f"added {best.applied.label()}: D {best.D0:.1f} -> {best.D:.1f}" + (f" ({edges})" if edges else "")
+    if top is None:  # every candidate ends at an edge
+        return f"the best, {edges}" if edges else "every candidate ends at an edge of its plausible range"
+    return ((f"{edges}; " if edges else "") + f"the best{' not at an edge' if edged else ''}, {top.applied.label()}, "
+            f"lowers D by {top.reduction:.2f}, {top.reduction / top.scale**2:.2f} after the misfit scale (needs > "
+            f"{sps.chi2.ppf(level, top.k):.2f}, the chi-square({top.k}) point at {100 * level:.2f} %, Bonferroni "
+            f"over {len(fits)} candidates)")
 
 
 def hidden_measured(hidden: Sequence[Applied], *, eyes: EyeModel, experiment: str = "guestrin2006",
