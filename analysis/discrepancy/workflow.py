@@ -10,11 +10,12 @@ add them to the model, and show the gap shrink, or say that no known effect expl
    screen of all, refinement of the best few) and ranked by D + 2k (k fitted parameters), in every round
    (not only those that lowered D in round 1: that hides a pair's smaller effect, whose drop of D in round 1
    is scaled down by the larger one's misfit).
-3. add: the top-ranked effect joins the model at its fitted values if it lowers D by more than the
-   chi-square(k) point at level 1 - `ALPHA_ADD` / n (after the misfit scale factor; `add_level`: Bonferroni over
-   the n candidates fitted in the round, for the best of n is chosen after seeing the data) and no fitted
-   parameter is at the edge of its plausible range (`EffectFit.passes`). Otherwise nothing is added and the
-   round says why.
+3. add: the top-ranked effect with no fitted parameter at the edge of its plausible range joins the model at
+   its fitted values if it lowers D by more than the chi-square(k) point at level 1 - `ALPHA_ADD` / n (after the
+   misfit scale factor; `add_level`: Bonferroni over the n candidates fitted in the round, for the best of n is
+   chosen after seeing the data; `EffectFit.passes`). A fit at an edge is evidence against its effect: it is
+   reported and never added, and the next candidate is considered (the search refined it for that case). If
+   nothing passes, nothing is added and the round says why.
    Steps 1-3 repeat for up to `rounds` rounds (a second effect is fitted with the first in the model).
    With two or more effects added, each is refitted with the others in the model (`_backfit`), and so are the
    last round's close contenders (`_contend`): up to `CONTENDERS` refined fits that lower D and score within
