@@ -7,8 +7,7 @@ recordings (`recording`) into per-subject conditions of the experiment (`metrics
 
 from __future__ import annotations
 
-import json
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +16,7 @@ from eyehil.analysis.discrepancy.data import BUILTIN, Measured, MeasuredConditio
 from eyehil.analysis.discrepancy.metrics import EXPERIMENTS
 from eyehil.analysis.discrepancy.metrics import experiment as get_experiment
 from eyehil.analysis.discrepancy.recording import feature_conditions, recorded_features
+from eyehil.drivers.recording import Recording, read_recording
 from eyehil.emulator.scene import load_scene
 
 
@@ -31,11 +31,11 @@ def measured_from_spec(spec: str, experiment: str | None = None) -> Measured:
     return load(spec)
 
 
-def recordings_experiment(paths: Sequence[str | Path]) -> str:
+def recordings_experiment(recordings: Iterable[Recording]) -> str:
     """The experiment whose scene the recordings' headers name (`"scene"`), guestrin2006 if none names one;
     ValueError if they name different scenes, or a scene no experiment runs in."""
     by_scene = {cls.scene: name for name, cls in EXPERIMENTS.items()}
-    scenes = {_header(path).get("scene") for path in paths} - {None}
+    scenes = {rec.header.get("scene") for rec in recordings} - {None}
     if len(scenes) > 1:
         raise ValueError(f"recordings of different scenes: {', '.join(sorted(map(str, scenes)))}")
     if not scenes:
@@ -47,17 +47,6 @@ def recordings_experiment(paths: Sequence[str | Path]) -> str:
     return by_scene[scene]
 
 
-def _header(path: str | Path) -> dict:
-    """A recording's first line as a dict ({} if it is not a JSON object: `read_recording` reports that later)."""
-    with open(path, encoding="utf-8", errors="replace") as f:
-        line = f.readline(1 << 20)
-    try:
-        header = json.loads(line)
-    except ValueError:
-        return {}
-    return header if isinstance(header, dict) else {}
-
-
 def measured_from_recordings(paths: Sequence[str | Path], experiment: str | None = None,
                              source: str = "") -> Measured:
     """Per-subject gaze and feature conditions of recordings (one per subject), paired by subject; `experiment`
@@ -65,10 +54,11 @@ def measured_from_recordings(paths: Sequence[str | Path], experiment: str | None
     position, Blignaut 2014's per calibration configuration) and the feature conditions of the right eye."""
     if len(paths) < 2:
         raise ValueError("measured recordings: at least 2 subjects")
-    experiment = experiment or recordings_experiment(paths)
+    recordings = {str(path): read_recording(path) for path in paths}
+    experiment = experiment or recordings_experiment(recordings.values())
     exp = get_experiment(experiment)
     scene = load_scene(exp.scene)
-    features = recorded_features(paths, scene)
+    features = recorded_features(recordings, scene)
     metrics = exp.metrics([features], scene)[0]
     names = [*exp.diagnostic_conditions(scene), *feature_conditions(features)]
     values = np.array([metrics[c] for c in names])

@@ -36,12 +36,12 @@ from __future__ import annotations
 
 import json
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 
-from eyehil.drivers.recording import FORMAT, VERSION, read_recording
+from eyehil.drivers.recording import FORMAT, VERSION, Recording
 from eyehil.emulator.features import Features, empty_features
 from eyehil.emulator.scene import Scene, load_scene
 from eyehil.protocols.enums import Eye
@@ -167,12 +167,12 @@ def _eye_record(features: Features, at: tuple[int, int, int, int], eye_id: int, 
                         "y": float(np.nan_to_num(g[1]))} for k, g in enumerate(glints)]}
 
 
-def recorded_features(paths: Sequence[str | Path], scene: Scene) -> Features:
-    """Fixation-mean features (E = one per recording, every side `scene` tracks, H, T) of recordings of `scene`."""
+def recorded_features(recordings: Mapping[str, Recording], scene: Scene) -> Features:
+    """Fixation-mean features (E = one per recording, every side `scene` tracks, H, T) of recordings of `scene`, read
+    (`read_recording`) and named (their paths, for the messages)."""
     H, T, L = len(scene.head_positions), len(scene.targets()), len(scene.leds)
-    out = empty_features(len(paths), scene, tuple(scene.head_positions), T, 1, scene.targets(), "recorded")
-    for e, path in enumerate(paths):
-        rec = read_recording(path)
+    out = empty_features(len(recordings), scene, tuple(scene.head_positions), T, 1, scene.targets(), "recorded")
+    for e, (path, rec) in enumerate(recordings.items()):
         if rec.header.get("scene", scene.name) != scene.name:
             raise ValueError(f"{path}: recorded in scene {rec.header['scene']!r}, expected {scene.name!r}")
         if len(rec) == 0:

@@ -357,27 +357,22 @@ def search_effects(effects: Sequence[Effect], evaluate: Callable[[list[Applied]]
     effect (one batch per stage), `score(conditions)` the D of each (conditions of P simulations, each (P, E), ->
     (P,): a batch's nodes and a surrogate grid are scored in one call); `progress(n)` after each batch."""
     searches = [EffectSearch(e, D0, n_conditions) for e in effects]
-    reserve: list[EffectSearch] = []  # screened out, best first: the next wave's
-    waves = 0
+    waves = 0  # of refinements after the first (module docstring, 2.)
     while True:
         asks = [(s, s.ask()) for s in searches if s.ask() is not None]
         if not asks:
             waiting = [s for s in searches if s.screened and s.stage == 0]
+            reserve = [s for s in searches if s.screened and s.stage == -1]
             if waiting:
-                ranked = sorted(waiting, key=lambda s: s.screen_score)
-                for s in ranked[:top]:
-                    s.continue_search()
-                for s in ranked[top:]:
-                    s.stage = -1  # screened out: done, unless the refined best ends at an edge
-                reserve = ranked[top:]
-                continue
-            if reserve and waves < EXTRA_WAVES and _best_at_edge(searches):
+                for s in waiting:
+                    s.stage = -1  # screened out: done, unless refined below or in a later wave
+            elif reserve and waves < EXTRA_WAVES and _best_at_edge(searches):
                 waves += 1
-                for s in reserve[:top]:
-                    s.continue_search()
-                reserve = reserve[top:]
-                continue
-            break
+            else:
+                break
+            for s in sorted(waiting or reserve, key=lambda s: s.screen_score)[:top]:
+                s.continue_search()
+            continue
         batch = [Applied.of(s.effect, dict(zip((p.name for p in s.effect.fitted), map(float, row), strict=True)))
                  for s, pts in asks for row in pts]
         metrics = evaluate(batch)

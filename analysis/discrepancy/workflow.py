@@ -50,6 +50,7 @@ workflow blind (tests/test_discrepancy*.py, `eyehil discrepancy --hidden`).
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
@@ -343,7 +344,7 @@ def choose(before: Comparison, fits: list[EffectFit]) -> Round:
     level = add_level(len(fits))
     free = next((f for f in fits if not f.at_edge), None)
     best = free if free is not None and free.passes(level) else None
-    return Round(before, fits, best, _verdict(best, fits, level), level)
+    return Round(before, fits, best, _verdict(best, free, fits, level), level)
 
 
 def _backfit(initial: Evaluator, search: Evaluator, measured: Measured, added: list[Applied],
@@ -399,11 +400,11 @@ def _contend(initial: Evaluator, search: Evaluator, measured: Measured, last: Ro
             added, fits, search)
 
 
-def _verdict(best: EffectFit | None, fits: list[EffectFit], level: float) -> str:
+def _verdict(best: EffectFit | None, top: EffectFit | None, fits: list[EffectFit], level: float) -> str:
+    """Why the round added `best` (or nothing); `top` the best fit not at an edge, the ones before it at edges."""
     if not fits:
         return "no candidate effect left"
-    top = best if best is not None else next((f for f in fits if not f.at_edge), None)
-    edged = [f for f in (fits if top is None else fits[:fits.index(top)]) if f.at_edge and f.lowers(level)]
+    edged = [f for f in itertools.takewhile(lambda f: f is not top, fits) if f.lowers(level)]
     edges = "; ".join(f"{f.applied.label()} ends at the edge of its plausible range ({', '.join(f.at_edge)}): "
                       "not added" for f in edged)
     if best is not None:
