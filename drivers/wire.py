@@ -4,9 +4,10 @@
 whatever arrives within `wait_s` seconds (waiting with select() on the link's descriptor when it has
 one, else with the link's own read timeout; a link that can be read without waiting, `read_now` or a pyserial
 posix port's descriptor, is drained up to `CHUNK` bytes between two selects, since a pseudo-terminal gives at
-most 4 kB a read), decodes it, and sorts it: FEATURES become `Sample`s in
-`samples`, FRAME_CHUNKs are reassembled (`eyehil.protocols.images.ImageAssembler`) into `ReceivedImage`s in
-`images`, every other message goes to `replies` with its arrival time. Faults are counted, never
+most 4 kB a read), decodes it, and sorts it: FEATURES become `Sample`s in `samples`, FRAME_CHUNKs are
+reassembled (`eyehil.protocols.images.ImageAssembler`; those that follow one another arrive as one
+`protocols.ChunkRun`) into `ReceivedImage`s in `images`, every other message goes to `replies` with its arrival
+time. Faults are counted, never
 raised (`HostStats`); only a failing link raises (`LinkError`). A FEATURES or FRAME_CHUNK whose seq is not
 newer than the last one (a duplicate or a late frame, already counted lost when its successor came) never
 reaches the application: it is dropped and counted (`duplicates_dropped`). Reassembly allocates at most
@@ -29,7 +30,7 @@ from eyehil.protocols.images import Image, ImageAssembler
 from eyehil.protocols.native import DEVICE_TYPES, Message, encode
 from eyehil.protocols.replies import ErrorReply
 from eyehil.protocols.samples import EyeFeatures, Features, FrameChunk
-from eyehil.protocols.stream import NativeReceiver, Received
+from eyehil.protocols.stream import ChunkRun, NativeReceiver, Received
 
 CHUNK = 65536
 MAX_BUFFERED_SAMPLES = 200_000
@@ -144,7 +145,7 @@ class Wire:
     def __init__(self, link, seq0: int = 1) -> None:
         """Use `link` (SerialLike); commands are numbered from `seq0`."""
         self.link = link
-        self.receiver = NativeReceiver(accept=DEVICE_TYPES)
+        self.receiver = NativeReceiver(accept=DEVICE_TYPES, chunk_runs=True)
         self.samples: deque[Sample] = deque()
         self.replies: deque[Reply] = deque()
         self.images: deque[ReceivedImage] = deque()
@@ -211,16 +212,16 @@ class Wire:
         """What the link holds now, up to `CHUNK` bytes, read without waiting (if a later read fails, what came
         before it is decoded first)."""
         data = self._read_now(CHUNK)
-        while data and len(data) < CHUNK:
+        pieces, size = [data], len(data)
+        while data and size < CHUNK:
             try:
-                more = self._read_now(CHUNK - len(data))
+                data = self._read_now(CHUNK - size)
             except OSError:
-                self._feed(data)
+                self._feed(b"".join(pieces))
                 raise
-            if not more:
-                break
-            data += more
-        return data
+            pieces.append(data)
+            size += len(data)
+        return b"".join(pieces)
 
     def pump(self, wait_s: float = 0.0) -> int:
         """Read and dispatch what arrives within `wait_s` s; return the number of bytes read."""
@@ -233,7 +234,9 @@ class Wire:
         """Decode `data` and dispatch its samples, replies and image chunks."""
         now = host_now_us()
         for event in self.receiver.feed(data):
-            if isinstance(event, Received):
+            if type(event) is ChunkRun:
+                self._run(event, now)
+            elif isinstance(event, Received):
                 self._dispatch(event, now)
         self._sync_counters()
 
@@ -274,15 +277,28 @@ class Wire:
         """Add a chunk to its image; keep the image when it is whole."""
         self.stats.chunks += 1
         image = self.assembler.add(chunk)
-        self.stats.images_incomplete = self.assembler.incomplete + self.assembler.inconsistent
-        self.stats.images_refused = self.assembler.refused
-        if image is None:
-            return
+        if image is not None:
+            self._keep(image, header.timestamp_us, header.seq, now)
+        self._sync_images()
+
+    def _run(self, run: ChunkRun, now: int) -> None:
+        """Add a run of chunks to its image, as `_chunk` each; keep the images they complete."""
+        self.stats.chunks += len(run)
+        for k, image in self.assembler.add_run(run.first, run.rest):
+            self._keep(image, run.header.timestamp_us, (run.header.seq + k) % SEQ_MODULUS, now)
+        self._sync_images()
+
+    def _keep(self, image: Image, device_us: int, seq: int, now: int) -> None:
+        """A whole image, for the application (the oldest unread is dropped beyond `MAX_BUFFERED_IMAGES`)."""
         self.stats.images += 1
         if len(self.images) >= MAX_BUFFERED_IMAGES:
             self.images.popleft()
             self.stats.images_overflowed += 1
-        self.images.append(ReceivedImage(image, header.timestamp_us, now, header.seq))
+        self.images.append(ReceivedImage(image, device_us, now, seq))
+
+    def _sync_images(self) -> None:
+        self.stats.images_incomplete = self.assembler.incomplete + self.assembler.inconsistent
+        self.stats.images_refused = self.assembler.refused
 
     def _sync_counters(self) -> None:
         c = self.receiver.counters

@@ -55,7 +55,7 @@ from eyehil.protocols.native import (
 )
 from eyehil.protocols.replies import Ack, DeviceInfo, ErrorReply, Pong, Status
 from eyehil.protocols.samples import EyeFeatures, Features, FrameChunk, Glint
-from eyehil.protocols.stream import NativeReceiver, Received, Rejected
+from eyehil.protocols.stream import ChunkRun, NativeReceiver, Received, Rejected
 
 __all__ = [
     "DEVICE_TYPES",
@@ -66,6 +66,7 @@ __all__ = [
     "BadLengthError",
     "BadMagicError",
     "Capability",
+    "ChunkRun",
     "CobsDecodeError",
     "Configure",
     "CrcError",

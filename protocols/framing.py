@@ -82,11 +82,12 @@ class FrameDecoder:
 
     def hand_over(self, data: bytes, first: int) -> bytes | None:
         """The frame in progress completed by `data`, whose first delimiter is at `first`: the bytes buffered for it
-        and `data`, the buffer emptied (decoding the first run of what is returned is what `feed` would do with it);
-        or None (nothing changed) if it is being skipped or would grow past `max_encoded`, which `feed` reports."""
+        and ``data[: first + 1]``, the buffer emptied (decoding what is returned is what `feed` would do with that
+        part); or None (nothing changed) if it is being skipped or would grow past `max_encoded`, which `feed`
+        reports."""
         if self._skipping or len(self._buf) + first > self.max_encoded:
             return None
-        joined = bytes(self._buf) + data
+        joined = bytes(self._buf) + data[: first + 1]
         self._buf.clear()
         return joined
 

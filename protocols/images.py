@@ -16,6 +16,7 @@ count), is refused and counted in ``refused``, before any allocation.
 from __future__ import annotations
 
 import struct
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from operator import attrgetter
 
@@ -139,6 +140,24 @@ class ImageAssembler:
 
     def add(self, chunk: FrameChunk) -> Image | None:
         """Take one chunk; return the image it completes, else None."""
+        return self._add(chunk, chunk.chunk_index, chunk.offset, chunk.data)
+
+    def add_run(self, first: FrameChunk, rest: Iterable[tuple[int, int, bytes]]) -> list[tuple[int, Image]]:
+        """Take `first`, then chunks of its image given as (chunk_index, offset, data) (the same frame id, eye and
+        geometry, each inside the image: `eyehil.protocols.stream.ChunkRun`), as `add` would one by one; return the
+        images they complete, each with the position in the run (`first` 0) of the chunk that completed it."""
+        images = []
+        image = self._add(first, first.chunk_index, first.offset, first.data)
+        if image is not None:
+            images.append((0, image))
+        for k, (index, offset, data) in enumerate(rest, 1):
+            image = self._add(first, index, offset, data)
+            if image is not None:
+                images.append((k, image))
+        return images
+
+    def _add(self, chunk: FrameChunk, index: int, offset: int, data: bytes) -> Image | None:
+        """`add` of a chunk with `chunk`'s frame id, eye and geometry, and the index, offset and data given."""
         part = self._partial.get(chunk.eye)
         if part is not None and part.first.frame_id != chunk.frame_id:
             self.incomplete += 1
@@ -150,12 +169,12 @@ class ImageAssembler:
                 return None
             part = _Partial(chunk, np.zeros(chunk.image_size, np.uint8))
             self._partial[chunk.eye] = part
-        if not _same_geometry(part.first, chunk):
+        elif part.first is not chunk and not _same_geometry(part.first, chunk):
             self.inconsistent += 1
             del self._partial[chunk.eye]
             return None
-        part.buffer.data[chunk.offset : chunk.offset + len(chunk.data)] = chunk.data
-        part.seen.add(chunk.chunk_index)
+        part.buffer.data[offset : offset + len(data)] = data
+        part.seen.add(index)
         return self._finish(chunk.eye) if len(part.seen) == chunk.chunk_count else None
 
     def _finish(self, eye: Eye) -> Image:

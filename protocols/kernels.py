@@ -97,23 +97,27 @@ class FrameBuffers:
         return memoryview(self.decoded).cast("B")
 
 
-def decode_frames(data: bytes, max_encoded: int, max_frame: int, buffers: FrameBuffers | None = None
-                  ) -> tuple[memoryview, list[list[int]]]:
-    """The frames of `data`, each a non-empty run of bytes ending at a 0x00 (`data` ends at one): a view of the
-    buffer their COBS decodings are in (`buffers.decoded`, valid until the next call), and per run a record [start,
-    length (of the run in `data`), offset, size (of its frame in the buffer; -1: not valid COBS, or longer than
-    `max_encoded`), verdict (0: size within [20, `max_frame`], CRC, magic and payload length pass, and the header
-    fields follow; else 1), version, type, seq, timestamp_us (as a signed 64-bit number), payload_len]."""
+def decode_frames(data: bytes, max_encoded: int, max_frame: int, buffers: FrameBuffers | None = None,
+                  start: int = 0, end: int | None = None) -> tuple[memoryview, list[list[int]]]:
+    """The frames of ``data[start:end]`` (read in place, not copied), each a non-empty run of bytes ending at a 0x00
+    (the part ends at one): a view of the buffer their COBS decodings are in (`buffers.decoded`, valid until the next
+    call), and per run a record [start (in `data`), length (of the run), offset, size (of its frame in the buffer; -1:
+    not valid COBS, or longer than `max_encoded`), verdict (0: size within [20, `max_frame`], CRC, magic and payload
+    length pass, and the header fields follow; else 1), version, type, seq, timestamp_us (as a signed 64-bit number),
+    payload_len]. ValueError if ``0 <= start <= end <= len(data)`` does not hold."""
     src = data if type(data) is bytes else bytes(data)
+    end = len(src) if end is None else end
+    if not 0 <= start <= end <= len(src):
+        raise ValueError(f"[{start}, {end}) is not a part of {len(src)} bytes")
     buffers = buffers or FrameBuffers()
-    view = buffers.room(len(src))
+    view = buffers.room(end - start)
     base = ctypes.cast(ctypes.c_char_p(src), ctypes.c_void_p).value  # `src` stays referenced while it is read
     out = ctypes.addressof(buffers.decoded)
     consumed = ctypes.c_size_t()
     rows: list[list[int]] = []
-    taken = dst = 0
-    while taken < len(src):
-        count = _LIB.eyehil_decode_frames(base + taken, len(src) - taken, max_encoded, max_frame, out + dst,
+    taken, dst = start, 0
+    while taken < end:
+        count = _LIB.eyehil_decode_frames(base + taken, end - taken, max_encoded, max_frame, out + dst,
                                           buffers.records, FRAMES_PER_CALL, ctypes.byref(consumed))
         block = buffers.record_view[: RECORD * count].tolist()
         at = dst  # this call's frames were written from here on

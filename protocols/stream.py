@@ -10,12 +10,16 @@ lost twice; one farther behind is a restarted sender and becomes the new baselin
 Still pure: no I/O, no clock, no threads. Where the compiled kernels can be had, the frames that lie whole in
 one `feed` are COBS-decoded and checked in one call (`eyehil.protocols.kernels.decode_frames`) and only the
 message is built in Python; a frame the kernel does not pass takes the per-frame path, which reports it, so the
-events and counters are the same either way (tests/test_protocol_stream.py).
+events and counters are the same either way (tests/test_protocol_stream.py). A host asks for `chunk_runs`: there,
+a FRAME_CHUNK that continues the one before it in such a call (the next seq, the same image, header timestamp and
+geometry, inside the image) is not built as a message of its own but joins that one's `ChunkRun` as (index, offset,
+bytes), a few microseconds instead of some ten; a run stands for exactly the `Received` events of its chunks
+(`ChunkRun.received`, tests/test_protocol_chunk_runs.py).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 from eyehil.protocols import kernels
 from eyehil.protocols.errors import (
@@ -28,9 +32,18 @@ from eyehil.protocols.errors import (
     UnsupportedVersionError,
 )
 from eyehil.protocols.framing import MAX_FRAME_SIZE, FaultKind, FrameDecoder, FramingFault
-from eyehil.protocols.header import HEADER_SIZE, SUPPORTED_VERSIONS, Header, MessageType, known_type, seq_gap
+from eyehil.protocols.header import (
+    HEADER_SIZE,
+    SEQ_MODULUS,
+    SUPPORTED_VERSIONS,
+    Header,
+    MessageType,
+    known_type,
+    seq_gap,
+)
 from eyehil.protocols.native import Message, decode, decode_payload, error_reply_for
 from eyehil.protocols.replies import ErrorReply
+from eyehil.protocols.samples import FrameChunk
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,6 +62,62 @@ class Rejected:
 
     error: ProtocolError | FramingFault
     reply: ErrorReply | None = None
+
+
+@dataclass(slots=True)
+class ChunkRun:
+    """FRAME_CHUNKs of one image that came one after another (the host's bulk of traffic), as one event: `first`,
+    received as any message (`header` its header, `lost_before` the frames missing before it), then the pieces of the
+    chunks after it, (chunk_index, offset, pixel bytes) in `rest`. Each of those has the next seq (the k-th after
+    `first` has seq + k, mod 2**32), `first`'s header timestamp, frame id, eye, geometry and chunk count, and passes
+    `FrameChunk`'s own checks (index below the count, bytes inside the image); a chunk that does not is not part of
+    a run. Built in place by `NativeReceiver`, which counts and sequences every chunk of it as a `Received`."""
+
+    header: Header
+    first: FrameChunk
+    lost_before: int
+    _timestamp: int  # the header timestamp as the kernel gives it (signed)
+    rest: list[tuple[int, int, bytes]] = field(default_factory=list)
+    _head: tuple = ()  # `first`'s raw frame id, eye, format, width, height, roi x and y, and chunk count
+    _size: int = 0  # `first`'s image size, bytes
+
+    def __post_init__(self) -> None:
+        c = self.first
+        self._head = (c.frame_id, int(c.eye), int(c.pixel_format), c.width, c.height, c.roi_x, c.roi_y, c.chunk_count)
+        self._size = c.image_size
+
+    def __len__(self) -> int:
+        """The chunks in the run."""
+        return 1 + len(self.rest)
+
+    def received(self) -> list[Received]:
+        """The run as the `Received` events its chunks stand for, one a chunk (what a receiver without `chunk_runs`
+        gives)."""
+        h, c = self.header, self.first
+        events = [Received(h, c, self.lost_before)]
+        for k, (index, offset, data) in enumerate(self.rest, 1):
+            header = replace(h, seq=(h.seq + k) % SEQ_MODULUS, payload_len=_CHUNK_HEAD + len(data))
+            events.append(Received(header, replace(c, chunk_index=index, offset=offset, data=data)))
+        return events
+
+    def extend(self, decoded: memoryview, body: int, number: int, seq: int, timestamp: int, payload_len: int) -> bool:
+        """Take the checked frame whose payload is ``decoded[body : body + payload_len]`` if it continues the run;
+        False (nothing taken) if not."""
+        if (number != _FRAME_CHUNK or seq != (self.header.seq + len(self.rest) + 1) % SEQ_MODULUS
+                or timestamp != self._timestamp or payload_len < _CHUNK_HEAD):
+            return False
+        frame_id, eye, fmt, width, height, roi_x, roi_y, index, count, offset = _CHUNK_STRUCT.unpack_from(decoded, body)
+        end = offset + payload_len - _CHUNK_HEAD
+        if ((frame_id, eye, fmt, width, height, roi_x, roi_y, count) != self._head or index >= count
+                or end > self._size):
+            return False
+        self.rest.append((index, offset, decoded[body + _CHUNK_HEAD : body + payload_len].tobytes()))
+        return True
+
+
+_FRAME_CHUNK = int(MessageType.FRAME_CHUNK)
+_CHUNK_STRUCT = FrameChunk.STRUCT
+_CHUNK_HEAD = FrameChunk.STRUCT.size
 
 
 @dataclass(slots=True)
@@ -106,53 +175,70 @@ class NativeReceiver:
         accept: frozenset[MessageType] | None = None,
         versions: frozenset[int] = SUPPORTED_VERSIONS,
         max_frame: int = MAX_FRAME_SIZE,
+        chunk_runs: bool = False,
     ) -> None:
-        """`accept`: message types this side takes (a device passes `native.HOST_TYPES`); None = all."""
+        """`accept`: message types this side takes (a device passes `native.HOST_TYPES`); None = all. `chunk_runs`:
+        FRAME_CHUNKs that follow one another come as `ChunkRun`s where the compiled kernels check them (a host)."""
         self.accept = accept
         self.versions = versions
         self.framer = FrameDecoder(max_frame)
         self.sequence = SequenceTracker()
         self.counters = LinkCounters()
+        self.chunk_runs = chunk_runs
         self._buffers = kernels.FrameBuffers() if kernels.AVAILABLE else None
 
-    def feed(self, data: bytes | bytearray | memoryview) -> list[Received | Rejected]:
+    def feed(self, data: bytes | bytearray | memoryview) -> list[Received | ChunkRun | Rejected]:
         """Consume bytes; return the messages and faults they completed, in stream order."""
         view = bytes(data)
         last = view.rfind(0)
         if last < 0 or not kernels.AVAILABLE:  # no delimiter: the frame in progress only grows
             return [self._event(item) for item in self.framer.feed(view)]
-        events: list[Received | Rejected] = []
+        events: list[Received | ChunkRun | Rejected] = []
+        start = 0
         if not self.framer.between_frames:  # the frame in progress ends at the first delimiter
             first = view.find(0)
             joined = self.framer.hand_over(view, first)
             if joined is None:
                 events += [self._event(item) for item in self.framer.feed(view[: first + 1])]
-                view, last = view[first + 1 :], last - first - 1
             else:
-                view, last = joined, last + len(joined) - len(view)
-        if last >= 0:
-            self._whole(view[: last + 1], events)
+                self._whole(joined, 0, len(joined), events)
+            start = first + 1
+        if start <= last:
+            self._whole(view, start, last + 1, events)
         events += [self._event(item) for item in self.framer.feed(view[last + 1 :])]
         return events
 
-    def _whole(self, data: bytes, events: list[Received | Rejected]) -> None:
-        """The frames `data` holds whole (it starts between frames and ends at a delimiter), checked in one compiled
-        call; a frame it does not pass, or whose version this side does not take, goes through the framer and
-        `_event` as if fed alone, which report it."""
-        decoded, records = kernels.decode_frames(data, self.framer.max_encoded, self.framer.max_frame, self._buffers)
-        for start, length, offset, _, verdict, version, number, seq, timestamp_us, payload_len in records:
+    def _whole(self, data: bytes, start: int, end: int, events: list[Received | ChunkRun | Rejected]) -> None:
+        """The frames ``data[start:end]`` holds whole (it starts between frames and ends at a delimiter), checked in
+        one compiled call; a frame it does not pass, or whose version this side does not take, goes through the
+        framer and `_event` as if fed alone, which report it. With `chunk_runs`, a FRAME_CHUNK that continues the
+        run before it (`ChunkRun`) joins it."""
+        decoded, records = kernels.decode_frames(data, self.framer.max_encoded, self.framer.max_frame, self._buffers,
+                                                 start, end)
+        run: ChunkRun | None = None
+        for at, length, offset, _, verdict, version, number, seq, timestamp_us, payload_len in records:
             if verdict or version not in self.versions:
-                events += [self._event(item) for item in self.framer.feed(data[start : start + length + 1])]
+                run = None
+                events += [self._event(item) for item in self.framer.feed(data[at : at + length + 1])]
                 continue
             self.framer.frames += 1
-            header = Header(version, known_type(number), seq, timestamp_us & 0xFFFFFFFFFFFFFFFF, payload_len)
             body = offset + HEADER_SIZE
+            if run is not None and run.extend(decoded, body, number, seq, timestamp_us, payload_len):
+                self.counters.rx_frames += 1
+                self.sequence.last = seq  # the next in sequence: no gap, not out of order
+                continue
+            header = Header(version, known_type(number), seq, timestamp_us & 0xFFFFFFFFFFFFFFFF, payload_len)
             try:
                 message = decode_payload(header, decoded[body : body + payload_len].tobytes(), self.accept)
             except ProtocolError as exc:
+                run = None
                 events.append(self._rejected(exc))
                 continue
-            events.append(self._received(header, message))
+            event = self._received(header, message)
+            run = None
+            if self.chunk_runs and type(message) is FrameChunk and not event.out_of_order:
+                event = run = ChunkRun(header, message, event.lost_before, timestamp_us)
+            events.append(event)
 
     def _event(self, item: bytes | FramingFault) -> Received | Rejected:
         """Turn one framing event into a `Received` or a `Rejected`, counting it."""
