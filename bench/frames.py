@@ -7,7 +7,8 @@ the chunks (`eyehil.drivers.wire`) and counts the images delivered per second of
 wall clock: exposures the device cannot render and send within the frame interval of the configured rate are
 dropped, so the rate (`RATE_HZ`) is set below what the link carries. Drops are counted over the measured window
 (STATUS while streaming); the images still rendering or waiting when the host sends STOP (up to `--render-workers`'
-four in flight) are abandoned by the device, counted in its STATUS as dropped, and reported apart. Then detection
+four in flight) are abandoned by the device, counted in its STATUS as dropped, and reported apart. Then the host's
+decoding of an image (`host_decode_us`: with `ChunkRun`s and chunk by chunk, in the same run), and detection
 throughput: `eyehil.drivers.detect.detect_eye` on the received images, one core. Targets (issue 16): >= 1,000
 frames/s over a pty and >= 2,000 over TCP, none dropped (`TARGET_FPS`). `CASES`: rendering on the device's thread or
 in one render process (`--render-workers 1`, rendering ahead of the link), and a pty paced to a full-speed USB
@@ -36,6 +37,7 @@ import numpy as np
 from bench.device import emulator
 from eyehil.drivers.client import open_tracker
 from eyehil.drivers.detect import detect_eye
+from eyehil.drivers.wire import CHUNK, Wire
 from eyehil.protocols.enums import Eye, StreamSelect
 from eyehil.protocols.images import ImageChunks
 
@@ -122,6 +124,36 @@ def terminal_ceiling(seconds: float = SECONDS) -> float:
     return received / len(image) / elapsed
 
 
+class _Discard:
+    """A link that takes what is written and gives nothing (`host_decode_us` feeds its `Wire` directly)."""
+
+    timeout = 0.0
+
+    def write(self, data: bytes) -> int:
+        return len(data)
+
+    def read(self, size: int) -> bytes:
+        return b""
+
+
+def host_decode_us(chunk_runs: bool, repeats: int, images: int = 200) -> float:
+    """Best-of-`repeats` microseconds the host's `Wire` takes to decode and reassemble one 320 x 240 image from its
+    wire bytes fed in 64 kB reads (`eyehil.drivers.wire.CHUNK`), with or without `ChunkRun`s (`chunk_runs`)."""
+    pixels = np.random.default_rng(0).integers(0, 256, (240, 320), dtype=np.uint8)
+    stream = b"".join(ImageChunks(k, Eye.RIGHT, pixels).wire(1 + 19 * k, k, 1 << 30)[0] for k in range(images))
+    best = float("inf")
+    for _ in range(repeats):
+        wire = Wire(_Discard())
+        wire.receiver.chunk_runs = chunk_runs
+        start = time.perf_counter()
+        for at in range(0, len(stream), CHUNK):
+            wire._feed(stream[at : at + CHUNK])
+        best = min(best, time.perf_counter() - start)
+        if wire.stats.images != images:
+            raise RuntimeError(f"the host decoded {wire.stats.images} of {images} images")
+    return best / images * 1e6
+
+
 def detection_fps(images: list, repeats: int) -> float:
     """Best-of-`repeats` images detected per second on one core."""
     threads = cv2.getNumThreads()
@@ -147,6 +179,8 @@ def run(repeats: int = 3) -> dict:
             if label not in results or r["fps"] > results[label]["fps"]:
                 results[label] = r
         results["terminal_fps"] = max(results["terminal_fps"], terminal_ceiling())
+    results["decode_us"] = host_decode_us(True, 5 * repeats)
+    results["decode_us_per_chunk"] = host_decode_us(False, 5 * repeats)
     images = results["tcp"]["images"][:300]
     results["detect_fps"] = detection_fps(images, repeats)
     results["detected"] = len(images)
@@ -170,6 +204,8 @@ def report(results: dict) -> str:
     ceiling = results["terminal_fps"]
     parts.append(f"the pseudo-terminal alone (a writer process, a raw reader) {ceiling:,.0f} images/s, of which the "
                  f"emulator's pty reaches {100 * results['pty']['fps'] / ceiling:.0f} %")
+    parts.append(f"the host decodes an image in {results['decode_us']:.0f} us ({results['decode_us_per_chunk']:.0f} us "
+                 "chunk by chunk, without runs)")
     return (f"320x240 frames over links, device in its own process, fast clock at {RATE_HZ} Hz: " + "; ".join(parts)
             + f"; host detection {results['detect_fps']:,.0f} frames/s on one core ({results['detected']} images)")
 

@@ -3,8 +3,8 @@
 `Wire` owns one SerialLike (`eyehil.drivers.links`) and a `protocols.NativeReceiver`. `pump(wait_s)` reads
 whatever arrives within `wait_s` seconds (waiting with select() on the link's descriptor when it has
 one, else with the link's own read timeout; a link that can be read without waiting, `read_now` or a pyserial
-posix port's descriptor, is drained up to `CHUNK` bytes between two selects, since a pseudo-terminal gives at
-most 4 kB a read), decodes it, and sorts it: FEATURES become `Sample`s in `samples`, FRAME_CHUNKs are
+posix port's descriptor, is drained up to `DRAIN` bytes between two selects, since a pseudo-terminal gives at
+most 4 kB a read, and each decoding call has a cost of its own), decodes it, and sorts it: FEATURES become `Sample`s in `samples`, FRAME_CHUNKs are
 reassembled (`eyehil.protocols.images.ImageAssembler`; those that follow one another arrive as one
 `protocols.ChunkRun`) into `ReceivedImage`s in `images`, every other message goes to `replies` with its arrival
 time. Faults are counted, never
@@ -32,7 +32,8 @@ from eyehil.protocols.replies import ErrorReply
 from eyehil.protocols.samples import EyeFeatures, Features, FrameChunk
 from eyehil.protocols.stream import ChunkRun, NativeReceiver, Received
 
-CHUNK = 65536
+CHUNK = 65536  # bytes asked of the link in one read
+DRAIN = 4 * CHUNK  # bytes gathered from a link that can be read without waiting before they are decoded (`_drain`)
 MAX_BUFFERED_SAMPLES = 200_000
 MAX_BUFFERED_IMAGES = 256
 
@@ -209,13 +210,13 @@ class Wire:
             raise LinkError(f"read failed: {exc}") from exc
 
     def _drain(self) -> bytes:
-        """What the link holds now, up to `CHUNK` bytes, read without waiting (if a later read fails, what came
-        before it is decoded first)."""
+        """What the link holds now, up to `DRAIN` bytes, read without waiting, `CHUNK` at most a read (if a later read
+        fails, what came before it is decoded first)."""
         data = self._read_now(CHUNK)
         pieces, size = [data], len(data)
-        while data and size < CHUNK:
+        while data and size < DRAIN:
             try:
-                data = self._read_now(CHUNK - size)
+                data = self._read_now(min(CHUNK, DRAIN - size))
             except OSError:
                 self._feed(b"".join(pieces))
                 raise

@@ -10,6 +10,7 @@ import threading
 import pytest
 from device_helpers import CoreHost, core_device
 
+from eyehil.drivers import wire as wire_module
 from eyehil.drivers.client import MAX_DRAIN_BYTES, Tracker
 from eyehil.drivers.errors import LinkError, TrackerError, TrackerTimeoutError
 from eyehil.drivers.links.tcp import TcpPort
@@ -228,6 +229,32 @@ def test_drain_returns_from_a_link_that_never_pauses() -> None:
     assert result and result[0], "drain() did not return"
     assert 20_000 <= link.read_bytes < 20_000 + 100
     assert MAX_DRAIN_BYTES < 64 * 1024 * 1024  # the default is bounded too
+
+
+class _FourKilobytesAtATime:
+    """A link read without waiting that always has 4 kB more, like a pseudo-terminal fed by a fast device."""
+
+    timeout = 0.0
+
+    def __init__(self) -> None:
+        self.asked: list[int] = []
+
+    def fileno(self) -> int:
+        return -1
+
+    def read_now(self, size: int) -> bytes:
+        self.asked.append(size)
+        return bytes(min(size, 4096))  # delimiters only: nothing to decode
+
+    def write(self, data: bytes) -> int:
+        return len(data)
+
+
+def test_a_pump_gathers_at_most_drain_bytes_asking_at_most_a_chunk_a_read() -> None:
+    link = _FourKilobytesAtATime()
+    wire = Wire(link)
+    assert wire.pump(0) == wire_module.DRAIN
+    assert max(link.asked) == wire_module.CHUNK and sum(min(a, 4096) for a in link.asked) == wire_module.DRAIN
 
 
 def test_tcp_write_to_a_peer_that_never_reads_raises() -> None:
