@@ -1,17 +1,16 @@
 """The host end of a native-protocol link: sequence-numbered sends, and a receive path that never hangs.
 
 `Wire` owns one SerialLike (`eyehil.drivers.links`) and a `protocols.NativeReceiver`. `pump(wait_s)` reads
-whatever arrives within `wait_s` seconds (waiting with select() on the link's descriptor when it has
-one, else with the link's own read timeout; a link that can be read without waiting, `read_now` or a pyserial
-posix port's descriptor, is drained up to `DRAIN` bytes between two selects, since a pseudo-terminal gives at
-most 4 kB a read, and each decoding call has a cost of its own), decodes it, and sorts it: FEATURES become `Sample`s in `samples`, FRAME_CHUNKs are
-reassembled (`eyehil.protocols.images.ImageAssembler`; those that follow one another arrive as one
+whatever arrives within `wait_s` seconds (waiting with select() on the link's descriptor when it has one, else with
+the link's own read timeout; a link that can be read without waiting, `read_now` or a pyserial posix port's
+descriptor, is drained up to `DRAIN` bytes between two selects, since a pseudo-terminal gives at most 4 kB a read
+and each decoding call has a cost of its own), decodes it, and sorts it: FEATURES become `Sample`s in `samples`,
+FRAME_CHUNKs are reassembled (`eyehil.protocols.images.ImageAssembler`; those that follow one another arrive as one
 `protocols.ChunkRun`) into `ReceivedImage`s in `images`, every other message goes to `replies` with its arrival
-time. Faults are counted, never
-raised (`HostStats`); only a failing link raises (`LinkError`). A FEATURES or FRAME_CHUNK whose seq is not
-newer than the last one (a duplicate or a late frame, already counted lost when its successor came) never
-reaches the application: it is dropped and counted (`duplicates_dropped`). Reassembly allocates at most
-`max_image_bytes` per image (`eyehil.protocols.images.ImageAssembler`). Host times are microseconds of
+time. Faults are counted, never raised (`HostStats`); only a failing link raises (`LinkError`). A FEATURES or
+FRAME_CHUNK whose seq is not newer than the last one (a duplicate or a late frame, already counted lost when its
+successor came) never reaches the application: it is dropped and counted (`duplicates_dropped`). Reassembly
+allocates at most `max_image_bytes` per image (`eyehil.protocols.images.ImageAssembler`). Host times are microseconds of
 ``time.monotonic_ns()``.
 """
 
