@@ -11,7 +11,8 @@ page's animation frames per second, the most images it can draw), and the loss
 counters that must stay at zero: the device's `samples_dropped`, the host's lost frames, overflowed samples and
 incomplete images, and the messages the view dropped for a slow page. Target (issue 14): with 250 Hz features
 and 60 Hz frames, loss counters zero; the page draws every image at 60 Hz (>= `TARGET_FPS`). The page keeps up
-when it draws at least `KEEP_UP` of the images the view receives, with the loss counters at zero; beside it, what
+when it draws at least `KEEP_UP` of the images the view receives, or of its animation frames where more images
+arrive than it has frames (`drawable`), with the loss counters at zero; beside it, what
 a bare host (no view, no page) receives from the same device just before: on a loaded machine the device renders
 fewer images than its rate, and fewer still when the view and the browser take their share of the CPU.
 """
@@ -105,6 +106,13 @@ def run(repeats: int = 3) -> dict:
             browser.close()
 
 
+def drawable(r: dict) -> float:
+    """Images per second the page could draw: those it received, but at most one an animation frame (a page shows the
+    newest image of each frame; at 250 Hz the device renders some 200 images a second, more than headless Chromium's
+    110-120 frames)."""
+    return min(r["images_per_s"], r["animation_fps"])
+
+
 def report(results: dict) -> str:
     parts = []
     for rate, r in results.items():
@@ -118,10 +126,10 @@ def report(results: dict) -> str:
     lossless = all(not any(r["loss"].values()) for r in results.values())
     r60 = results.get(60)
     verdict = "PASS" if r60 and r60["page_fps"] >= TARGET_FPS and lossless else "FAIL"
-    keeps_up = "PASS" if lossless and all(r["page_fps"] >= KEEP_UP * r["images_per_s"]
-                                          for r in results.values()) else "FAIL"
+    keeps_up = "PASS" if lossless and all(r["page_fps"] >= KEEP_UP * drawable(r) for r in results.values()) else "FAIL"
     return ("live view in headless Chromium, device in its own process on TCP, features + 320x240 images: "
-            + "; ".join(parts) + f"; the page draws >= {KEEP_UP:.0%} of the images received, zero loss: "
+            + "; ".join(parts) + f"; the page draws >= {KEEP_UP:.0%} of the images received (of its animation frames "
+            "where more images arrive than it has frames), zero loss: "
             f"{keeps_up}; target 60 Hz images drawn (>= {TARGET_FPS:.0f}/s) with zero loss: {verdict}")
 
 
