@@ -78,8 +78,8 @@ class ChunkRun:
     lost_before: int
     _timestamp: int  # the header timestamp as the kernel gives it (signed)
     rest: list[tuple[int, int, bytes]] = field(default_factory=list)
-    _head: tuple = ()  # `first`'s raw frame id, eye, format, width, height, roi x and y, and chunk count
-    _size: int = 0  # `first`'s image size, bytes
+    _head: tuple = field(init=False, default=())  # `first`'s raw frame id, eye, format, size, roi and chunk count
+    _size: int = field(init=False, default=0)  # `first`'s image size, bytes
 
     def __post_init__(self) -> None:
         c = self.first
