@@ -69,9 +69,10 @@ class ChunkRun:
     """FRAME_CHUNKs of one image that came one after another (the host's bulk of traffic), as one event: `first`,
     received as any message (`header` its header, `lost_before` the frames missing before it), then the pieces of the
     chunks after it, (chunk_index, offset, pixel bytes) in `rest`. Each of those has the next seq (the k-th after
-    `first` has seq + k, mod 2**32), `first`'s header timestamp, frame id, eye, geometry and chunk count, and passes
-    `FrameChunk`'s own checks (index below the count, bytes inside the image); a chunk that does not is not part of
-    a run. Built in place by `NativeReceiver`, which counts and sequences every chunk of it as a `Received`."""
+    `first` has seq + k, mod 2**32), `first`'s protocol version, header timestamp, frame id, eye, geometry and chunk
+    count, and passes `FrameChunk`'s own checks (index below the count, bytes inside the image); a chunk that does
+    not is not part of a run. Built in place by `NativeReceiver`, which counts and sequences every chunk of it as a
+    `Received`."""
 
     header: Header
     first: FrameChunk
@@ -100,11 +101,12 @@ class ChunkRun:
             events.append(Received(header, replace(c, chunk_index=index, offset=offset, data=data)))
         return events
 
-    def extend(self, decoded: memoryview, body: int, number: int, seq: int, timestamp: int, payload_len: int) -> bool:
+    def extend(self, decoded: memoryview, body: int, version: int, number: int, seq: int, timestamp: int,
+               payload_len: int) -> bool:
         """Take the checked frame whose payload is ``decoded[body : body + payload_len]`` if it continues the run;
         False (nothing taken) if not."""
         if (number != _FRAME_CHUNK or seq != (self.header.seq + len(self.rest) + 1) % SEQ_MODULUS
-                or timestamp != self._timestamp or payload_len < _CHUNK_HEAD):
+                or timestamp != self._timestamp or version != self.header.version or payload_len < _CHUNK_HEAD):
             return False
         frame_id, eye, fmt, width, height, roi_x, roi_y, index, count, offset = _CHUNK_STRUCT.unpack_from(decoded, body)
         end = offset + payload_len - _CHUNK_HEAD
@@ -223,7 +225,7 @@ class NativeReceiver:
                 continue
             self.framer.frames += 1
             body = offset + HEADER_SIZE
-            if run is not None and run.extend(decoded, body, number, seq, timestamp_us, payload_len):
+            if run is not None and run.extend(decoded, body, version, number, seq, timestamp_us, payload_len):
                 self.counters.rx_frames += 1
                 self.sequence.last = seq  # the next in sequence: no gap, not out of order
                 continue

@@ -4,9 +4,9 @@ A run stands for the `Received` events of its chunks (`ChunkRun.received`), so a
 report, once its runs are expanded, exactly the events, counters and framer state of the per-frame path (the
 compiled kernels switched off); and a `Wire` (which asks for runs) must deliver the same images, with the same
 device times and sequence numbers, and the same counters. The streams are hostile: chunks lost, duplicated,
-swapped, from a restarted sender, with another timestamp, frame id, eye, geometry or chunk count than the chunks
-before them, an index or offset outside the image, a flipped byte, a short payload, other messages between them,
-all cut at random places.
+swapped, from a restarted sender, with another timestamp, protocol version, frame id, eye, geometry or chunk count
+than the chunks before them, an index or offset outside the image, a flipped byte, a short payload, other messages
+between them, all cut at random places.
 """
 
 from __future__ import annotations
@@ -28,14 +28,14 @@ from eyehil.protocols.replies import Pong
 
 pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason=f"compiled kernels unavailable: {kernels.REASON}")
 
-MUTATIONS = ("lose", "duplicate", "swap", "restart", "timestamp", "frame_id", "eye", "width", "count", "index",
-             "offset", "flip", "short", "features", "pong")
+MUTATIONS = ("lose", "duplicate", "swap", "restart", "timestamp", "version", "frame_id", "eye", "width", "count",
+             "index", "offset", "flip", "short", "features", "pong")
 
 
-def _chunk_frame(seq: int, timestamp: int, head: list[int], data: bytes) -> bytes:
+def _chunk_frame(seq: int, timestamp: int, head: list[int], data: bytes, version: int = 1) -> bytes:
     """The wire bytes of a FRAME_CHUNK built field by field (so that fields a `FrameChunk` refuses can be sent)."""
     payload = FrameChunk.STRUCT.pack(*head) + data
-    return encode_frame(pack_frame(MessageType.FRAME_CHUNK, seq % 2**32, timestamp, payload))
+    return encode_frame(pack_frame(MessageType.FRAME_CHUNK, seq % 2**32, timestamp, payload, version=version))
 
 
 def _chunk_stream(rng: np.random.Generator) -> tuple[bytes, set[str]]:
@@ -62,7 +62,7 @@ def _chunk_stream(rng: np.random.Generator) -> tuple[bytes, set[str]]:
                 field = {"frame_id": 0, "eye": 1, "width": 3, "count": 8, "index": 7, "offset": 9}[kind]
                 head[field] = {"eye": 1 - eye, "count": count + 1, "index": count, "offset": size}.get(kind,
                                                                                                     head[field] + 1)
-            frame = _chunk_frame(seq, stamp, head, data)
+            frame = _chunk_frame(seq, stamp, head, data, 2 if kind == "version" else 1)
             if kind == "short":
                 frame = encode_frame(pack_frame(MessageType.FRAME_CHUNK, seq % 2**32, stamp, b"\x01" * 9))
             elif kind == "flip":
@@ -120,12 +120,12 @@ def test_runs_stand_for_the_events_of_their_chunks(seed: int, monkeypatch) -> No
     rng = np.random.default_rng(seed)
     stream, _ = _chunk_stream(rng)
     pieces = _pieces(rng, stream)
-    for accept in (None, DEVICE_TYPES):
-        *runs, _ = _receiver_report(NativeReceiver(accept=accept, chunk_runs=True), pieces)
-        *plain, none = _receiver_report(NativeReceiver(accept=accept), pieces)
+    for accept, versions in ((None, frozenset({1})), (DEVICE_TYPES, frozenset({1})), (None, frozenset({1, 2}))):
+        *runs, _ = _receiver_report(NativeReceiver(accept, versions, chunk_runs=True), pieces)
+        *plain, none = _receiver_report(NativeReceiver(accept, versions), pieces)
         with monkeypatch.context() as patch:
             patch.setattr(kernels, "AVAILABLE", False)
-            *slow, _ = _receiver_report(NativeReceiver(accept=accept, chunk_runs=True), pieces)
+            *slow, _ = _receiver_report(NativeReceiver(accept, versions, chunk_runs=True), pieces)
         assert runs == plain == slow
         assert none == 0  # runs only where asked for
 
