@@ -285,7 +285,7 @@ class Wire:
         """Add a run of chunks to its image, as `_chunk` each; keep the images they complete."""
         self.stats.chunks += len(run)
         for k, image in self.assembler.add_run(run.first, run.rest):
-            self._keep(image, run.header.timestamp_us, (run.header.seq + k) % SEQ_MODULUS, now)
+            self._keep(image, run.header.timestamp_us, run.seq(k), now)
         self._sync_images()
 
     def _keep(self, image: Image, device_us: int, seq: int, now: int) -> None:

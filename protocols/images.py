@@ -15,6 +15,7 @@ count), is refused and counted in ``refused``, before any allocation.
 
 from __future__ import annotations
 
+import itertools
 import struct
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -146,15 +147,9 @@ class ImageAssembler:
         """Take `first`, then chunks of its image given as (chunk_index, offset, data) (the same frame id, eye and
         geometry, each inside the image: `eyehil.protocols.stream.ChunkRun`), as `add` would one by one; return the
         images they complete, each with the position in the run (`first` 0) of the chunk that completed it."""
-        images = []
-        image = self._add(first, first.chunk_index, first.offset, first.data)
-        if image is not None:
-            images.append((0, image))
-        for k, (index, offset, data) in enumerate(rest, 1):
-            image = self._add(first, index, offset, data)
-            if image is not None:
-                images.append((k, image))
-        return images
+        pieces = itertools.chain([(first.chunk_index, first.offset, first.data)], rest)
+        images = [(k, self._add(first, index, offset, data)) for k, (index, offset, data) in enumerate(pieces)]
+        return [(k, image) for k, image in images if image is not None]
 
     def _add(self, chunk: FrameChunk, index: int, offset: int, data: bytes) -> Image | None:
         """`add` of a chunk with `chunk`'s frame id, eye and geometry, and the index, offset and data given."""

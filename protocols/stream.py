@@ -77,7 +77,6 @@ class ChunkRun:
     header: Header
     first: FrameChunk
     lost_before: int
-    _timestamp: int  # the header timestamp as the kernel gives it (signed)
     rest: list[tuple[int, int, bytes]] = field(default_factory=list)
     _head: tuple = field(init=False, default=())  # `first`'s raw frame id, eye, format, size, roi and chunk count
     _size: int = field(init=False, default=0)  # `first`'s image size, bytes
@@ -91,22 +90,27 @@ class ChunkRun:
         """The chunks in the run."""
         return 1 + len(self.rest)
 
+    def seq(self, k: int) -> int:
+        """The seq of the run's `k`-th chunk (`first` 0)."""
+        return (self.header.seq + k) % SEQ_MODULUS
+
     def received(self) -> list[Received]:
         """The run as the `Received` events its chunks stand for, one a chunk (what a receiver without `chunk_runs`
         gives)."""
         h, c = self.header, self.first
         events = [Received(h, c, self.lost_before)]
         for k, (index, offset, data) in enumerate(self.rest, 1):
-            header = replace(h, seq=(h.seq + k) % SEQ_MODULUS, payload_len=_CHUNK_HEAD + len(data))
+            header = replace(h, seq=self.seq(k), payload_len=_CHUNK_HEAD + len(data))
             events.append(Received(header, replace(c, chunk_index=index, offset=offset, data=data)))
         return events
 
     def extend(self, decoded: memoryview, body: int, version: int, number: int, seq: int, timestamp: int,
                payload_len: int) -> bool:
-        """Take the checked frame whose payload is ``decoded[body : body + payload_len]`` if it continues the run;
-        False (nothing taken) if not."""
-        if (number != _FRAME_CHUNK or seq != (self.header.seq + len(self.rest) + 1) % SEQ_MODULUS
-                or timestamp != self._timestamp or version != self.header.version or payload_len < _CHUNK_HEAD):
+        """Take the checked frame whose payload is ``decoded[body : body + payload_len]`` (its header fields as the
+        kernel gives them, the timestamp unsigned) if it continues the run; False (nothing taken) if not."""
+        h = self.header
+        if (number != _FRAME_CHUNK or seq != self.seq(len(self.rest) + 1) or timestamp != h.timestamp_us
+                or version != h.version or payload_len < _CHUNK_HEAD):
             return False
         frame_id, eye, fmt, width, height, roi_x, roi_y, index, count, offset = _CHUNK_STRUCT.unpack_from(decoded, body)
         end = offset + payload_len - _CHUNK_HEAD
@@ -224,22 +228,21 @@ class NativeReceiver:
                 events += [self._event(item) for item in self.framer.feed(data[at : at + length + 1])]
                 continue
             self.framer.frames += 1
-            body = offset + HEADER_SIZE
+            body, timestamp_us = offset + HEADER_SIZE, timestamp_us & 0xFFFFFFFFFFFFFFFF
             if run is not None and run.extend(decoded, body, version, number, seq, timestamp_us, payload_len):
                 self.counters.rx_frames += 1
                 self.sequence.last = seq  # the next in sequence: no gap, not out of order
                 continue
-            header = Header(version, known_type(number), seq, timestamp_us & 0xFFFFFFFFFFFFFFFF, payload_len)
+            run = None
+            header = Header(version, known_type(number), seq, timestamp_us, payload_len)
             try:
                 message = decode_payload(header, decoded[body : body + payload_len].tobytes(), self.accept)
             except ProtocolError as exc:
-                run = None
                 events.append(self._rejected(exc))
                 continue
             event = self._received(header, message)
-            run = None
             if self.chunk_runs and type(message) is FrameChunk and not event.out_of_order:
-                event = run = ChunkRun(header, message, event.lost_before, timestamp_us)
+                event = run = ChunkRun(header, message, event.lost_before)
             events.append(event)
 
     def _event(self, item: bytes | FramingFault) -> Received | Rejected:
