@@ -30,6 +30,7 @@ from eyehil.analysis.discrepancy.guestrin import guestrin_metrics
 from eyehil.analysis.discrepancy.measured import load_recordings
 from eyehil.analysis.discrepancy.metrics import Evaluator
 from eyehil.analysis.discrepancy.recording import write_recording
+from eyehil.analysis.discrepancy.report import render_markdown
 from eyehil.analysis.discrepancy.search import max_evaluations, search_effects, surrogate_minimum
 from eyehil.analysis.discrepancy.stats import (
     compare,
@@ -497,6 +498,8 @@ def test_the_last_rounds_contenders_are_backfitted_in_its_place_and_the_best_kep
     assert result.summary()["rivals"][kept] == ([other] if close else [])
     assert ("fits better in its place" in last.verdict) == (kept != ranked[0])
     assert kept == "pupil_decentre" or close  # the hidden effect is kept or reported as undecidable from the mimic
+    assert result.summary()["twins"][kept] == [other]  # twins (tests/test_effect_twins.py): named whatever the fits
+    assert f"No recording tells {kept} from its twin {other}" in render_markdown(result, "figure.png")
 
 
 def test_recordings_round_trip_and_a_hidden_effect_is_named_from_them(tmp_path, hidden_eyes) -> None:

@@ -102,6 +102,9 @@ def _round(i: int, r: Round) -> list[str]:
     if r.rivals:
         lines.append(f"The data cannot tell {r.added.effect.name} from {', '.join(r.rivals)}: D + 2k within "
                      f"{RIVAL_SCORE:g} of its own.")
+    if r.added is not None and r.added.effect.twins:
+        lines.append(f"No recording tells {r.added.effect.name} from its twin {', '.join(r.added.effect.twins)}: "
+                     "at matched values they change every condition alike (docs/discrepancy.md, the catalogue).")
     return [*lines, ""]
 
 

@@ -10,17 +10,18 @@ workflow blind on the first `search_eyes` published eyes (show: the first `show_
   D of data with that effect alone, simulated on the same hidden eyes, against the search eyes' model
   without effects);
 - negative: nothing hidden;
-- outside: one effect hidden and removed from the catalogue the workflow may use.
+- outside: one effect hidden and removed, with its twins (`outside`), from the catalogue the workflow may use.
 
 The model eyes (`--model-eyes`) are the published eyes by default, or a Rozema draw of their own (`model_eyes`).
 
 Scores per trial (`score`): named (the hidden effect is the first named, outcome "explained"), both named and
 in order (pairs: both named; and in the order of their sizes), nothing added (negatives), "none explains"
 (outside), shrink (1 - D_after / D_before, show eyes), whether each hidden effect was added or fitted as well as
-an added one (`hidden_among_rivals`: the data could not tell it from the one named), and whether each hidden
-parameter lies within the fit's 95 % interval (1.96 sigma); and whether each hidden effect is `visible`, opening
-a gap of its own that some method could name. Records go to DIR/trials-EXPERIMENT-KIND[-TAGS].jsonl, one line per
-trial (appended), and the run ends with its `rates` against the issue's `TARGETS`. `--jobs N` runs N trials at once.
+an added one or is its twin (`hidden_among_rivals`: the data could not tell it from the one named), and whether
+each hidden parameter lies within the fit's 95 % interval (1.96 sigma); and whether each hidden effect is
+`visible`, opening a gap of its own that some method could name. Records go to
+DIR/trials-EXPERIMENT-KIND[-TAGS].jsonl, one line per trial (appended), and the run ends with its `rates` against
+the issue's `TARGETS`. `--jobs N` runs N trials at once.
 """
 
 from __future__ import annotations
@@ -84,7 +85,8 @@ def trial(kind: str, index: int, *, experiment: str, search_eyes: int, show_eyes
     elif kind == "pair":
         a, b = rng.choice(len(names), 2, replace=False)
         hidden = [Applied.of(effects.get(names[i]), draw(effects.get(names[i]), rng)) for i in (a, b)]
-    allowed = [n for n in names if not (kind == "outside" and n == hidden[0].effect.name)]
+    removed = outside(hidden[0].effect) if kind == "outside" else set()
+    allowed = [n for n in names if n not in removed]
     eyes = sample(hidden_eyes, np.random.default_rng(seed + 7 + index)).eyes
     conditions = None
     if features:  # as from recordings: the gaze conditions and every feature condition, per subject
@@ -105,11 +107,18 @@ def trial(kind: str, index: int, *, experiment: str, search_eyes: int, show_eyes
     result = run_discrepancy(measured, eyes=show[:show_eyes], search_eyes=show[:search_eyes],
                              effect_names=allowed, rounds=2, seed=seed)
     record = {"kind": kind, "index": index, "experiment": experiment, "features": features, "model_eyes": model,
-              "hidden": [a.label() for a in hidden], "hidden_order": order,
+              "hidden": [a.label() for a in hidden], "hidden_order": order, "removed": sorted(removed),
               "sizes": gaps,
               "hidden_values": {a.effect.name: dict(a.values) for a in hidden}, "seconds": time.perf_counter() - start,
               **result.summary()}
     return {**record, **score(record, result, hidden)}
+
+
+def outside(effect) -> set[str]:
+    """The effects an "outside" trial removes from the catalogue: the hidden one and its `twins`, which no data can
+    tell from it (left in, a twin explains the data as well as the hidden effect would: the trial would test
+    identifiability, not the "none explains" criterion)."""
+    return {effect.name, *effect.twins}
 
 
 def sizes(hidden, eyes, experiment: str, conditions, noise_seed: int, search_eyes, seed: int) -> dict[str, float]:
@@ -149,7 +158,7 @@ def score(record: dict, result, hidden) -> dict:
         out["named"] = bool(named) and named[0] == truth[0] and record["outcome"] == "explained"
     out["added_nothing"] = not result.added
     by_added = record.get("rivals", {})  # added effect -> its rivals
-    rivals = set(by_added).union(*by_added.values())
+    rivals = set(by_added).union(*by_added.values(), *record.get("twins", {}).values())
     out["hidden_among_rivals"] = [name in rivals for name in truth]
     covered = []
     for a in hidden:

@@ -42,7 +42,9 @@ interaction D0 - D_all - sum_i (D0 - D_i) (0 when their contributions add; compu
 
 Whether the data can tell the candidates apart: each round's `rivals` are the other effects whose fit is as good
 as the added one's (D + 2k within `RIVAL_SCORE`, the rule of thumb for two AICs: Burnham & Anderson 2002,
-"Model selection and multimodel inference", section 2.6); `summary.json` lists them per added effect.
+"Model selection and multimodel inference", section 2.6); `summary.json` lists them per added effect, and the
+added effects' `twins` (`eyehil.emulator.effects.base`: effects that change every condition alike at matched
+values, which no number of eyes tells apart).
 
 `hidden_measured` makes "measured" data by simulating other eyes with hidden effects, for testing the
 workflow blind (tests/test_discrepancy*.py, `eyehil discrepancy --hidden`).
@@ -176,7 +178,8 @@ class DiscrepancyResult:
         return sum(len(a.effect.fitted) for a in self.added)
 
     def summary(self) -> dict[str, Any]:
-        """What summary.json holds: the named effects in order, the rivals of each added one (`Round.rivals`),
+        """What summary.json holds: the named effects in order, the rivals of each added one (`Round.rivals`) and
+        its twins (`Effect.twins`: effects no recording tells from it, fitted or not),
         their parameters (value, 1 sigma, 95 % half-width, edge flags), D before and after on the show eyes, the
         outcome and its reason."""
         by_name = {f.effect.name: f for f in self.fits}
@@ -189,6 +192,7 @@ class DiscrepancyResult:
         return {"outcome": self.outcome, "reason": self.reason,
                 "named_effects": [a.effect.name for a in self.named],
                 "rivals": {r.added.effect.name: r.rivals for r in self.rounds if r.added is not None},
+                "twins": {a.effect.name: list(a.effect.twins) for a in self.added if a.effect.twins},
                 "partial_effects": [] if self.outcome == "explained" else [a.effect.name for a in self.added],
                 "parameters": parameters,
                 "gap_before": {"D": self.before.D, "significant": [g.condition for g in self.before.significant]},

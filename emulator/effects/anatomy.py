@@ -95,6 +95,7 @@ class CorneaDecentre(Effect):
     name = "cornea_decentre"
     prior = "tenths of a mm; gkaModelEye puts the apex 0.62 mm nasal of the stop's axis"
     reference = "gkaModelEye (Aguirre 2019): the turned cornea's apex lies 0.62 mm nasal of the stop's axis"
+    twins = ("pupil_decentre",)  # the pupil moved by minus the shift: the same pupil against the corneal centre
     parameters = (
         Parameter("nasal_mm", "mm", 0.0, -1.0, 1.0, doc="corneal apex toward the nose (right eye +x)"),
         Parameter("superior_mm", "mm", 0.0, -1.0, 1.0, doc="corneal apex upward"),

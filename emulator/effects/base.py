@@ -20,6 +20,12 @@ displacement per fixation) sets `needs_sensitivity` and computes it once in `sen
 session, heads)` (by ray tracing displaced copies); the runner caches it per effect and passes it to
 `perturb(..., sensitivity=...)`: such an effect costs no ray tracing per parameter value.
 
+An effect names its `twins`: effects of the catalogue that change every feature and gaze error alike, to well
+below the spread between eyes, at matched values (a decentred pupil and a cornea decentred the other way move
+the pupil against the corneal centre identically). No recording tells twins apart, whatever its number of eyes;
+a report names the twins of what it adds, and a blind trial of an effect "outside the catalogue" removes its
+twins with it (`eyehil.analysis.discrepancy.trials`). tests/test_effect_twins.py checks every declaration.
+
 The host never learns about an effect: a scene changed by `apply` is the truth of the simulation, while the
 host keeps the nominal scene (e.g. a lens distortion it does not correct). Every effect is the identity at
 its parameters' `neutral` values. Values are a plain mapping {parameter name: float} in the units of
@@ -72,6 +78,7 @@ class Effect:
     stage: ClassVar[str] = "model"
     validation_only: ClassVar[bool] = False
     needs_sensitivity: ClassVar[bool] = False
+    twins: ClassVar[tuple[str, ...]] = ()  # effects no data can tell from this one (module docstring)
 
     def __init_subclass__(cls, **kwargs: object) -> None:
         """A subclass with a `name` joins the registry (a later class of the same name replaces it)."""

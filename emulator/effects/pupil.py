@@ -38,6 +38,7 @@ class PupilDecentre(Effect):
     name = "pupil_decentre"
     reference = "Wildenmann & Schaeffel 2013, Ophthalmic Physiol Opt 33:634-641"
     prior = "0.18 +- 0.19 mm nasal, 0.30 +- 0.30 mm superior (at 4 mm pupil; 10 right eyes)"
+    twins = ("cornea_decentre",)  # the cornea moved by minus the shift: the same pupil against the corneal centre
     parameters = (
         Parameter("nasal_mm", "mm", 0.0, -0.4, 0.8, doc="pupil centre toward the nose (right eye +x)"),
         Parameter("superior_mm", "mm", 0.0, -0.4, 0.8, doc="pupil centre upward"),
