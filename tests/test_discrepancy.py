@@ -644,8 +644,10 @@ def test_blind_trial_rates_count_each_kind_against_the_issues_targets() -> None:
                 for i in range(10)]
     records += [{"kind": "negative", "added_nothing": True, "visible": [], "covered": [], "outcome": "no gap"},
                 {"kind": "outside", "added_nothing": False, "visible": [True], "covered": [],
-                 "outcome": "explained"}]
+                 "outcome": "explained"},
+                {"kind": "outside", "added_nothing": True, "visible": [False], "covered": [], "outcome": "no gap"}]
     counts = rates(records)
+    assert counts["outside_none_explains"] == [0, 2] and counts["outside_none_explains_of_visible"] == [0, 1]
     assert counts["singles_named"] == [9, 11] and counts["singles_named_of_visible"] == [9, 10]
     assert counts["pairs_in_order"] == [7, 10] and counts["pairs_in_order_of_visible"] == [7, 9]
     assert counts["shrink_70"] == [18, 19]  # the 9 named singles and the 10 pairs named both

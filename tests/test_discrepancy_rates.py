@@ -1,31 +1,73 @@
-"""The discrepancy workflow's blind-trial rates over the whole catalogue, against issue 18's targets.
+"""The discrepancy workflow's blind-trial rates over the whole catalogue, against issue 18's targets, for both
+presets: Guestrin 2006 and Blignaut 2014 measured as from recordings (the gaze conditions and every feature
+condition), and Guestrin 2006 as per-subject gaze-error tables.
 
-Every effect of the catalogue is hidden once at a random strength (`trials.draw`: 40-90 % of the way from neutral to
-a bound), in data from 20 hidden eyes of a Rozema 2011 draw, measured as from recordings (the gaze conditions and
-every feature condition); 10 random pairs; 4 negative controls; 4 effects hidden and removed, with their twins
-(`Effect.twins`, `trials.outside`), from the catalogue the workflow may choose from. The workflow runs blind on
-model eyes of their own (a Rozema draw, 16 search eyes, 20 show eyes), the settings of docs/discrepancy.md's
-rates. The trials are seeded: the rates are those of the record in docs/discrepancy.md, and a change of the
-workflow that moves one shows here. About 20 minutes of CPU, run in two processes (`trials.run_trials`).
+In each setting every effect of the experiment's catalogue (`trials.catalogue`) is hidden once at a random strength
+(`trials.draw`: 40-90 % of the way from neutral to a bound) in data from 20 hidden eyes of a Rozema 2011 draw; 10
+random pairs; 4 negative controls; 4 effects hidden and removed, with their twins (`Effect.twins`,
+`trials.outside`), from the catalogue the workflow may choose from. The workflow runs blind on model eyes of their
+own (a Rozema draw, 16 search eyes, 20 show eyes), the settings of docs/discrepancy.md's rates. The trials are
+seeded: the rates are those of the record in docs/discrepancy.md, and a change of the workflow that moves one shows
+here. A rate a setting does not reach is a strict xfail saying why (`SHORT`): reaching it fails the test, so the
+record is kept true. About 20 minutes of CPU a setting, run in two processes (`trials.run_trials`).
 """
 
 from __future__ import annotations
 
 import pytest
 
-from eyehil.analysis.discrepancy.trials import TARGETS, met, rates, run_trials
-from eyehil.emulator import effects
+from eyehil.analysis.discrepancy.trials import TARGETS, catalogue, met, rates, run_trials
 
-SETTINGS = {"experiment": "guestrin2006", "search_eyes": 16, "show_eyes": 20, "hidden_eyes": 20, "seed": 0,
-            "features": True, "model": "rozema"}
-KINDS = {"single": len(effects.names()), "pair": 10, "negative": 4, "outside": 4}
+COMMON = {"search_eyes": 16, "show_eyes": 20, "hidden_eyes": 20, "seed": 0, "model": "rozema"}
+SETTINGS = {
+    "guestrin2006-recordings": {"experiment": "guestrin2006", "features": True},
+    "blignaut2014-recordings": {"experiment": "blignaut2014", "features": True},
+    "guestrin2006-tables": {"experiment": "guestrin2006", "features": False},
+}
+COUNTS = {"pair": 10, "negative": 4, "outside": 4}
+
+#: (setting, rate) -> why the setting does not reach the issue's target (docs/discrepancy.md, 18th session)
+SHORT: dict[tuple[str, str], str] = {
+    ("blignaut2014-recordings", "singles_named"): (
+        "9 of 17, 9 of the 13 visible: at one head position the corneal index, tangential distortion, camera pose "
+        "and astigmatism open no gap and the pupil ellipse no significant one; the two decentrations are named as "
+        "each other's twin; glint occlusion, which acts only on eyes whose glint meets the pupil's edge, is 'none "
+        "explains' (feature noise added, glint occlusion its rival)"),
+    ("blignaut2014-recordings", "pairs_in_order"): (
+        "1 of 10, 1 of the 5 whose two effects are visible: one effect of the pair is invisible at one head position "
+        "in 5; of the other 4, one names the larger alone, one names both in the other order, one a tilted cornea "
+        "for a decentred pupil, and one (glint occlusion with a camera pose) ends 'none explains'"),
+    ("blignaut2014-recordings", "outside_none_explains"): (
+        "2 of 4: the corneal index opens no gap ('no gap'); a decentred pupil, removed with its twin, is explained by "
+        "a tilted cornea, its near-mimic at one head position (0.5 spreads between eyes in its worst condition)"),
+    ("blignaut2014-recordings", "shrink_70"): (
+        "10 of 11: a lens distortion (k1 2.67, fitted 2.81 +- 0.27) shrinks the show eyes' D from 141.7 to 43.8, "
+        "69 %, against a no-effect floor of about 35"),
+    ("guestrin2006-tables", "singles_named"): (
+        "16 of 21, 16 of the 19 visible: in two mean errors per head position feature noise and head jitter are "
+        "named as fixation error (per-fixation scatter alike) and a decentred pupil as its twin, the decentred "
+        "cornea; the corneal index and the pupil ellipse open no gap in gaze errors"),
+    ("guestrin2006-tables", "pairs_in_order"): (
+        "2 of 10, 2 of the 8 visible: 5 end 'none explains' after mimics of head roll and screen tilt (a pupil "
+        "shift, a decentred cornea); 3 name one effect of two, two of them beside the invisible corneal index"),
+    ("guestrin2006-tables", "outside_none_explains"): (
+        "2 of 4: feature noise is explained by fixation error, a pupil change by a pupil shift (without the pupil's "
+        "size, its change is its centre's shift)"),
+}
+
+
+@pytest.fixture(scope="module", params=list(SETTINGS))
+def setting(request) -> str:
+    return request.param
 
 
 @pytest.fixture(scope="module")
-def records() -> list[dict]:
+def records(setting) -> list[dict]:
+    settings = {**COMMON, **SETTINGS[setting]}
+    kinds = {"single": len(catalogue(settings["experiment"])), **COUNTS}
     out = []
-    for kind, count in KINDS.items():
-        out += list(run_trials(kind, range(count), jobs=2, **SETTINGS))
+    for kind, count in kinds.items():
+        out += list(run_trials(kind, range(count), jobs=2, **settings))
     return out
 
 
@@ -34,43 +76,54 @@ def counts(records) -> dict[str, list[int]]:
     return rates(records)
 
 
+def _expect(request, setting: str, rate: str) -> None:
+    if (setting, rate) in SHORT:
+        request.applymarker(pytest.mark.xfail(strict=True, reason=SHORT[setting, rate]))
+
+
 def _misses(records: list[dict], kind: str, key: str) -> list[str]:
     return [f"{r['index']}: {', '.join(r['hidden']) or 'nothing'} -> {r['outcome']} {r['named_effects']}"
             for r in records if r["kind"] == kind and not r[key]]
 
 
-def test_every_effect_of_the_catalogue_is_hidden_once(records) -> None:
+def test_every_effect_of_the_catalogue_is_hidden_once(setting, records) -> None:
     singles = sorted(r["hidden"][0].split("(")[0] for r in records if r["kind"] == "single")
-    assert singles == sorted(effects.names())
+    assert singles == sorted(catalogue(SETTINGS[setting]["experiment"]))
 
 
-def test_single_hidden_effects_are_named(records, counts) -> None:
+def test_single_hidden_effects_are_named(request, setting, records, counts) -> None:
+    _expect(request, setting, "singles_named")
     hits, n = counts["singles_named"]
     assert met(counts)["singles_named"], (f"{hits} of {n} named, target {TARGETS['singles_named']:.0%}; misses: "
                                           + "; ".join(_misses(records, "single", "named")))
 
 
-def test_pairs_are_named_in_the_order_of_their_sizes(records, counts) -> None:
+def test_pairs_are_named_in_the_order_of_their_sizes(request, setting, records, counts) -> None:
+    _expect(request, setting, "pairs_in_order")
     hits, n = counts["pairs_in_order"]
     assert met(counts)["pairs_in_order"], (f"{hits} of {n} in order, target {TARGETS['pairs_in_order']:.0%}; misses: "
                                            + "; ".join(_misses(records, "pair", "in_order")))
 
 
-def test_nothing_is_added_on_negative_controls(records, counts) -> None:
+def test_nothing_is_added_on_negative_controls(request, setting, records, counts) -> None:
+    _expect(request, setting, "negatives_nothing_added")
     assert met(counts)["negatives_nothing_added"], _misses(records, "negative", "added_nothing")
 
 
-def test_an_effect_outside_the_catalogue_is_not_explained(records, counts) -> None:
+def test_an_effect_outside_the_catalogue_is_not_explained(request, setting, records, counts) -> None:
+    _expect(request, setting, "outside_none_explains")
     assert met(counts)["outside_none_explains"], [
         f"{r['hidden']} -> {r['outcome']} {r['named_effects']}" for r in records
         if r["kind"] == "outside" and r["outcome"] != "none explains"]
 
 
-def test_named_effects_shrink_the_gap_by_70_percent(records, counts) -> None:
+def test_named_effects_shrink_the_gap_by_70_percent(request, setting, records, counts) -> None:
+    _expect(request, setting, "shrink_70")
     assert met(counts)["shrink_70"], [f"{r['hidden']}: {r['shrink']:.0%}" for r in records
                                       if r["kind"] in ("single", "pair") and r["named_effects"] and r["shrink"] < 0.7]
 
 
-def test_hidden_parameters_lie_within_their_reported_uncertainty(counts) -> None:
+def test_hidden_parameters_lie_within_their_reported_uncertainty(request, setting, counts) -> None:
+    _expect(request, setting, "covered")
     hits, n = counts["covered"]
     assert met(counts)["covered"], f"{hits} of {n} hidden parameters within the fit's 95 % interval"

@@ -77,7 +77,7 @@ def trial(kind: str, index: int, *, experiment: str, search_eyes: int, show_eyes
     from eyehil.emulator.eye.population import sample
 
     rng = np.random.default_rng(seed + 1000 * index)
-    names = [n for n in effects.names() if not (experiment == "blignaut2014" and effects.get(n).validation_only)]
+    names = catalogue(experiment)
     hidden: list[Applied] = []
     if kind in ("single", "outside"):
         e = effects.get(names[index % len(names)])
@@ -112,6 +112,14 @@ def trial(kind: str, index: int, *, experiment: str, search_eyes: int, show_eyes
               "hidden_values": {a.effect.name: dict(a.values) for a in hidden}, "seconds": time.perf_counter() - start,
               **result.summary()}
     return {**record, **score(record, result, hidden)}
+
+
+def catalogue(experiment: str) -> list[str]:
+    """The effects a trial of `experiment` hides and the workflow may name: the whole catalogue, less the effects
+    acting only at validation head positions where the experiment has one head position (Blignaut 2014)."""
+    from eyehil.emulator import effects
+
+    return [n for n in effects.names() if not (experiment == "blignaut2014" and effects.get(n).validation_only)]
 
 
 def outside(effect) -> set[str]:
@@ -196,6 +204,8 @@ def rates(records: list[dict]) -> dict[str, list[int]]:
             "pairs_in_order_of_visible": count(r["in_order"] for r in pairs if all(r.get("visible", [True]))),
             "negatives_nothing_added": count(r["added_nothing"] for r in kind("negative")),
             "outside_none_explains": count(r["outcome"] == "none explains" for r in kind("outside")),
+            "outside_none_explains_of_visible": count(r["outcome"] == "none explains" for r in kind("outside")
+                                                      if all(r.get("visible", [True]))),
             "shrink_70": count(r["shrink"] >= 0.7 for r in named),
             "covered": count(c for r in singles + pairs for c in r["covered"])}
 
