@@ -16,13 +16,10 @@ import pytest
 from scipy.optimize import minimize
 
 from eyehil.analysis.discrepancy.metrics import Evaluator
-from eyehil.analysis.discrepancy.metrics import experiment as named_experiment
-from eyehil.analysis.discrepancy.recording import feature_names
-from eyehil.analysis.discrepancy.trials import draw, outside
+from eyehil.analysis.discrepancy.trials import draw, outside, recording_conditions
 from eyehil.emulator import effects
 from eyehil.emulator.effects import Applied
 from eyehil.emulator.eye.population import sample
-from eyehil.emulator.scene import load_scene
 
 #: the largest difference of twins left in any condition and eye, in units of the spread between eyes: two samples
 #: of eyes whose means differ by 0.1 spreads need about 1,600 eyes each to tell apart (5 %, 80 % power)
@@ -31,10 +28,8 @@ TWIN = 0.1
 
 @pytest.fixture(scope="module")
 def evaluator() -> tuple[Evaluator, list[str]]:
-    chosen = named_experiment("guestrin2006")
-    host = load_scene(chosen.scene)
-    conditions = [*chosen.diagnostic_conditions(host), *feature_names(host.head_positions)]
-    return Evaluator("guestrin2006", sample(16, np.random.default_rng(5)).eyes, seed=1), conditions
+    eyes = sample(16, np.random.default_rng(5)).eyes
+    return Evaluator("guestrin2006", eyes, seed=1), recording_conditions("guestrin2006")
 
 
 def _pairs() -> list[tuple[str, str]]:
@@ -45,18 +40,20 @@ def _closest(evaluator, conditions, target: Applied, twin_name: str) -> tuple[np
     """The twin's values that best reproduce `target`'s conditions, and per condition the largest difference per
     eye left (in units of the spread between eyes) and the target's own largest change, with the values."""
     twin = effects.get(twin_name)
-    base, wanted = evaluator.evaluate([[], [target]])
-    spread = np.array([np.nanstd(base[c]) for c in conditions])
+
+    def stack(metrics) -> np.ndarray:  # (condition, eye)
+        return np.array([np.asarray(metrics[c], float) for c in conditions])
+
+    base, goal = (stack(m) for m in evaluator.evaluate([[], [target]]))
+    spread = np.nanstd(base, axis=1)
     keep = spread > 0
-    goal = np.array([np.asarray(wanted[c], float) for c in conditions])
 
     def values(x) -> dict[str, float]:
         return {p.name: float(v) for p, v in zip(twin.fitted, x, strict=True)}
 
     def differences(points) -> list[np.ndarray]:
         got = evaluator.evaluate([[Applied.of(twin, values(x))] for x in points])
-        return [np.nan_to_num((np.array([np.asarray(g[c], float) for c in conditions]) - goal)[keep]
-                              / spread[keep, None]) for g in got]
+        return [np.nan_to_num((stack(g) - goal)[keep] / spread[keep, None]) for g in got]
 
     # a grid over the twin's plausible range, then Nelder-Mead from its best node (the conditions carry the
     # ray tracer's numerical noise, about 1e-5 spreads: too rough for finite-difference gradients)
@@ -67,8 +64,7 @@ def _closest(evaluator, conditions, target: Applied, twin_name: str) -> tuple[np
     fit = minimize(lambda x: float((differences([x])[0] ** 2).sum()), start, method="Nelder-Mead", bounds=box,
                    options={"xatol": 1e-3, "fatol": 1e-4, "maxfev": 120})
     left = np.abs(differences([fit.x])[0]).max(axis=1)
-    own = np.nanmax(np.abs(goal - np.array([np.asarray(base[c], float) for c in conditions]))[keep]
-                    / spread[keep, None], axis=1)
+    own = np.nanmax(np.abs(goal - base)[keep] / spread[keep, None], axis=1)
     return left, own, values(fit.x)
 
 

@@ -88,15 +88,7 @@ def trial(kind: str, index: int, *, experiment: str, search_eyes: int, show_eyes
     removed = outside(hidden[0].effect) if kind == "outside" else set()
     allowed = [n for n in names if n not in removed]
     eyes = sample(hidden_eyes, np.random.default_rng(seed + 7 + index)).eyes
-    conditions = None
-    if features:  # as from recordings: the gaze conditions and every feature condition, per subject
-        from eyehil.analysis.discrepancy.metrics import experiment as named_experiment
-        from eyehil.analysis.discrepancy.recording import feature_names
-        from eyehil.emulator.scene import load_scene
-
-        chosen = named_experiment(experiment)
-        host = load_scene(chosen.scene)
-        conditions = [*chosen.diagnostic_conditions(host), *feature_names(host.head_positions)]
+    conditions = recording_conditions(experiment) if features else None
     measured = hidden_measured(hidden, eyes=eyes, experiment=experiment, conditions=conditions,
                                seed=seed + 3 + index)
     show = model_eyes(model, max(show_eyes, search_eyes), seed)
@@ -114,12 +106,30 @@ def trial(kind: str, index: int, *, experiment: str, search_eyes: int, show_eyes
     return {**record, **score(record, result, hidden)}
 
 
+def _host(experiment: str):
+    from eyehil.analysis.discrepancy.metrics import experiment as named_experiment
+    from eyehil.emulator.scene import load_scene
+
+    chosen = named_experiment(experiment)
+    return chosen, load_scene(chosen.scene)
+
+
+def recording_conditions(experiment: str) -> list[str]:
+    """The conditions of `experiment` as from recordings: its gaze conditions and every feature condition."""
+    from eyehil.analysis.discrepancy.recording import feature_names
+
+    chosen, host = _host(experiment)
+    return [*chosen.diagnostic_conditions(host), *feature_names(host.head_positions)]
+
+
 def catalogue(experiment: str) -> list[str]:
     """The effects a trial of `experiment` hides and the workflow may name: the whole catalogue, less the effects
-    acting only at validation head positions where the experiment has one head position (Blignaut 2014)."""
+    acting only at validation head positions where the experiment has one head position (Blignaut 2014; the rule
+    of `workflow.candidates`)."""
     from eyehil.emulator import effects
 
-    return [n for n in effects.names() if not (experiment == "blignaut2014" and effects.get(n).validation_only)]
+    one_session = len(_host(experiment)[1].head_positions) < 2
+    return [n for n in effects.names() if not (one_session and effects.get(n).validation_only)]
 
 
 def outside(effect) -> set[str]:
