@@ -28,7 +28,7 @@ import pytest
 from eyehil.analysis.discrepancy.data import Measured, MeasuredCondition, guestrin2006_real, load
 from eyehil.analysis.discrepancy.guestrin import guestrin_metrics
 from eyehil.analysis.discrepancy.measured import load_recordings
-from eyehil.analysis.discrepancy.metrics import Evaluator
+from eyehil.analysis.discrepancy.metrics import Evaluator, Memo
 from eyehil.analysis.discrepancy.recording import write_recording
 from eyehil.analysis.discrepancy.report import render_markdown
 from eyehil.analysis.discrepancy.search import max_evaluations, search_effects, surrogate_minimum
@@ -419,6 +419,33 @@ def test_negative_control_finds_no_gap_and_adds_nothing(hidden_eyes) -> None:
     assert not result.rounds[0].before.significant
     assert result.added == [] and result.rounds[0].fits == [] and result.outcome == "no gap"
     assert result.after.D == result.before.D
+
+
+def test_a_memo_returns_the_same_conditions_and_evaluates_only_unseen_points() -> None:
+    """A point's conditions do not depend on its batch: a memo shared by two evaluators of the same eyes, base and
+    seed returns exactly what evaluating gives and evaluates only the new points; another seed or base is another
+    key; the least recently used point goes first at the limit; a caller cannot change what the memo holds."""
+    eyes = published_eyes()[:4]
+    noise, roll = effects.get("feature_noise"), effects.get("head_roll")
+    points = [[Applied.of(noise, sigma_px=0.2)], [Applied.of(roll, roll_deg=3.0)], [Applied.of(roll, roll_deg=-2.0)]]
+    more = [*points, [Applied.of(noise, sigma_px=0.4)]]
+    plain = Evaluator("guestrin2006", eyes, seed=0).evaluate(more)
+    memo = Memo(limit=4)
+    first = Evaluator("guestrin2006", eyes, seed=0, memo=memo).evaluate(points)
+    assert (memo.hits, memo.misses, len(memo)) == (0, 3, 3)
+    first[0]["H1"][:] = np.nan  # the caller's copy
+    again = Evaluator("guestrin2006", eyes, seed=0, memo=memo).evaluate(more)
+    assert (memo.hits, memo.misses, len(memo)) == (3, 4, 4)
+    for got, want in zip(again, plain, strict=True):
+        assert got.keys() == want.keys()
+        for k in want:
+            np.testing.assert_array_equal(got[k], want[k])
+    Evaluator("guestrin2006", eyes, seed=1, memo=memo).evaluate(points[:1])
+    assert (memo.hits, memo.misses, len(memo)) == (3, 5, 4)  # another seed: evaluated, the oldest point dropped
+    Evaluator("guestrin2006", eyes, seed=0, memo=memo).evaluate(points[:1])
+    assert (memo.hits, memo.misses) == (3, 6)  # it was points[0], the least recently used
+    with pytest.raises(ValueError, match="at least one point"):
+        Memo(limit=0)
 
 
 def test_four_subjects_and_nothing_hidden_show_no_spurious_gap() -> None:

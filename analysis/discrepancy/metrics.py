@@ -17,7 +17,11 @@ point with the same Generator seed: common random numbers; a session that no ext
 reused from the base), and runs the experiment on all points together (Guestrin: one batched calibration,
 warm-started from the base fit; a point whose extra effects act only at the validation head positions
 and draw no random numbers has the base's calibration session, so it reuses the base's calibrated
-parameters instead of calibrating again). Effects that act through their features' sensitivity
+parameters instead of calibrating again). A point's conditions do not depend on the other points of its batch, so
+an evaluator given a `Memo` keeps them, keyed by what determines them (experiment, eyes, base effects, seed and
+the point's effects and values), and evaluates only points it has not seen: the workflow's first-round screen
+(the same nodes of every effect on the same search eyes) is evaluated once for many runs on one set of model eyes
+(the blind trials). Effects that act through their features' sensitivity
 (`eyehil.emulator.effects.subject`) have it computed once per evaluator, in the parent process, and cached.
 The host always keeps the nominal scene. The evaluator traces `PUPIL_POINTS` points of each pupil's boundary
 (the ellipse fitted through them gives the pupil centre, axes and angle within 1e-8 px of a default 30-point
@@ -26,7 +30,10 @@ trace on the published eyes, at half the cost; the glint occlusion reads the fit
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import hashlib
+import pickle
+from collections import OrderedDict
+from collections.abc import Callable, Hashable, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass, replace
 
@@ -176,17 +183,57 @@ def evaluate_points(setup: Setup, points: Sequence[Sequence[Applied]]) -> list[M
     return experiment(setup.experiment).metrics(features, setup.host, setup.start, calibrated)
 
 
+def applied_key(applied: Sequence[Applied]) -> tuple:
+    """What identifies a list of applied effects: their names and values, in order."""
+    return tuple((a.effect.name, tuple(sorted(a.values.items()))) for a in applied)
+
+
+class Memo:
+    """Evaluated points' conditions, at most `limit` points (the least recently used go first; a point of 16 eyes
+    holds some 15 kB with its arrays' overhead, in either experiment with features). `hits` and `misses` count
+    lookups."""
+
+    def __init__(self, limit: int = 3000):
+        if limit < 1:
+            raise ValueError(f"a memo holds at least one point, got limit {limit}")
+        self.limit, self.hits, self.misses = limit, 0, 0
+        self._points: OrderedDict[Hashable, Metrics] = OrderedDict()
+
+    def __len__(self) -> int:
+        return len(self._points)
+
+    def get(self, key: Hashable) -> Metrics | None:
+        found = self._points.get(key)
+        if found is None:
+            self.misses += 1
+            return None
+        self.hits += 1
+        self._points.move_to_end(key)
+        return {k: np.array(v, copy=True) for k, v in found.items()}
+
+    def put(self, key: Hashable, metrics: Metrics) -> None:
+        self._points[key] = {k: np.array(v, copy=True) for k, v in metrics.items()}
+        self._points.move_to_end(key)
+        while len(self._points) > self.limit:
+            self._points.popitem(last=False)
+
+
 class Evaluator:
     """Per-eye conditions of `eyes` under `base` effects plus extra effects, batched over points.
 
-    With a process `pool` (concurrent.futures), a batch of points is split among its workers."""
+    With a process `pool` (concurrent.futures), a batch of points is split among its workers; with a `memo`, points
+    evaluated before (by this or any evaluator of the same experiment, eyes, base and seed) are not evaluated
+    again."""
 
     def __init__(self, experiment_name: str, eyes: EyeModel, *, base: Sequence[Applied] = (), seed: int = 0,
-                 pool: Executor | None = None, workers: int = 1):
+                 pool: Executor | None = None, workers: int = 1, memo: Memo | None = None):
         self.experiment = experiment(experiment_name)
         self.host = load_scene(self.experiment.scene)
         self.eyes, self.base, self.seed = eyes.as_batch(), tuple(base), seed
-        self.pool, self.workers = pool, workers
+        self.pool, self.workers, self.memo = pool, workers, memo
+        self._key = None if memo is None else (
+            experiment_name, hashlib.blake2b(pickle.dumps(self.eyes), digest_size=16).hexdigest(),
+            applied_key(self.base), seed, PUPIL_POINTS)
         cache = {session: simulate_session(self.eyes, self.host, self.base, session, heads,
                                            n_pupil_points=PUPIL_POINTS)
                  for session, heads in sessions(self.host)}
@@ -210,18 +257,28 @@ class Evaluator:
     def with_base(self, base: Sequence[Applied]) -> Evaluator:
         """The same eyes, seed and pool with other base effects."""
         return Evaluator(self.experiment.name, self.eyes, base=base, seed=self.seed, pool=self.pool,
-                         workers=self.workers)
+                         workers=self.workers, memo=self.memo)
 
     def evaluate(self, points: Sequence[Sequence[Applied]],
                  progress: Callable[[int], None] | None = None) -> list[Metrics]:
         """Conditions for every point (a list of extra effects each)."""
-        self._sensitivities([a for p in points for a in p])
-        if self.pool is None or self.workers < 2 or len(points) < 2:
-            out = evaluate_points(self.setup, points)
-        else:
-            parts = [list(c) for c in np.array_split(np.arange(len(points)), self.workers) if len(c)]
-            futures = [self.pool.submit(evaluate_points, self.setup, [points[i] for i in c]) for c in parts]
-            out = [m for f in futures for m in f.result()]
+        keys = [(self._key, applied_key(p)) for p in points] if self.memo is not None else []
+        found = [self.memo.get(k) for k in keys] if self.memo is not None else [None] * len(points)
+        todo = [p for p, m in zip(points, found, strict=True) if m is None]
+        new = iter(self._evaluate(todo) if todo else [])
+        out = [m if m is not None else next(new) for m in found]
+        if self.memo is not None:
+            for k, m, old in zip(keys, out, found, strict=True):
+                if old is None:
+                    self.memo.put(k, m)
         if progress is not None:
             progress(len(points))
         return out
+
+    def _evaluate(self, points: Sequence[Sequence[Applied]]) -> list[Metrics]:
+        self._sensitivities([a for p in points for a in p])
+        if self.pool is None or self.workers < 2 or len(points) < 2:
+            return evaluate_points(self.setup, points)
+        parts = [list(c) for c in np.array_split(np.arange(len(points)), self.workers) if len(c)]
+        futures = [self.pool.submit(evaluate_points, self.setup, [points[i] for i in c]) for c in parts]
+        return [m for f in futures for m in f.result()]

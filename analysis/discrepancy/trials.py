@@ -22,6 +22,10 @@ each hidden parameter lies within the fit's 95 % interval (1.96 sigma); and whet
 `visible`, opening a gap of its own that some method could name. Records go to
 DIR/trials-EXPERIMENT-KIND[-TAGS].jsonl, one line per trial (appended), and the run ends with its `rates` against
 the issue's `TARGETS`. `--jobs N` runs N trials at once.
+
+The trials of one process share a `Memo` of evaluated points (`memo()`): every trial of a setting runs the
+workflow on the same model eyes, so the first round's screen (some 300 points, most of a trial's time) is
+evaluated once per process, and a trial's record is the same as without it.
 """
 
 from __future__ import annotations
@@ -34,6 +38,17 @@ from pathlib import Path
 import numpy as np
 
 LOW, HIGH = 0.4, 0.9
+_memo = None  # this process's `Memo` of evaluated points (`memo()`)
+
+
+def memo():
+    """This process's `Memo` of the workflow's evaluated points, shared by its trials (module docstring)."""
+    global _memo
+    if _memo is None:
+        from eyehil.analysis.discrepancy.metrics import Memo
+
+        _memo = Memo()
+    return _memo
 
 
 def draw(effect, rng: np.random.Generator) -> dict[str, float]:
@@ -97,7 +112,7 @@ def trial(kind: str, index: int, *, experiment: str, search_eyes: int, show_eyes
     order = sorted(named, key=lambda name: -gaps[name])
     start = time.perf_counter()
     result = run_discrepancy(measured, eyes=show[:show_eyes], search_eyes=show[:search_eyes],
-                             effect_names=allowed, rounds=2, seed=seed)
+                             effect_names=allowed, rounds=2, seed=seed, memo=memo())
     record = {"kind": kind, "index": index, "experiment": experiment, "features": features, "model_eyes": model,
               "hidden": [a.label() for a in hidden], "hidden_order": order, "removed": sorted(removed),
               "sizes": gaps,

@@ -62,7 +62,7 @@ import numpy as np
 import scipy.stats as sps
 
 from eyehil.analysis.discrepancy.data import Measured, MeasuredCondition
-from eyehil.analysis.discrepancy.metrics import Evaluator
+from eyehil.analysis.discrepancy.metrics import Evaluator, Memo
 from eyehil.analysis.discrepancy.search import TOP, EffectFit, max_evaluations, search_effects
 from eyehil.analysis.discrepancy.stats import Comparison, compare, gap_measure, permutation_gof
 from eyehil.emulator import effects as registry
@@ -242,14 +242,16 @@ def name_effects(evaluator: Evaluator, measured: Measured, before: Comparison, e
 
 def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel | None = None,
                     effect_names: Sequence[str] | None = None, rounds: int = 2, alpha: float = 0.05,
-                    seed: int = 0, workers: int = 1, progress: Progress | None = None) -> DiscrepancyResult:
+                    seed: int = 0, workers: int = 1, progress: Progress | None = None,
+                    memo: Memo | None = None) -> DiscrepancyResult:
     """The whole workflow (module docstring); `search_eyes` defaults to `eyes`; `workers` > 1 evaluates the
-    points of each search stage in that many processes; `progress` hears of every stage."""
+    points of each search stage in that many processes; `progress` hears of every stage; a `memo` keeps the
+    evaluated points for later runs on the same model eyes (`eyehil.analysis.discrepancy.metrics.Memo`)."""
     progress = progress or Silent()
     with worker_pool(workers) if workers > 1 else nullcontext() as pool:  # Ctrl-C: the workers stop at once
         progress.stage("simulating and calibrating the search eyes", 1)
         search = initial = Evaluator(measured.experiment, search_eyes if search_eyes is not None else eyes,
-                                     seed=seed, pool=pool, workers=workers)
+                                     seed=seed, pool=pool, workers=workers, memo=memo)
         progress.advance(1)
         done, added, fits = [], [], []
         names = list(effect_names or registry.names())
@@ -284,7 +286,7 @@ def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel
         if search_eyes is None:
             show_before, show_after = initial, search
         else:
-            show_before = Evaluator(measured.experiment, eyes, seed=seed, pool=pool, workers=workers)
+            show_before = Evaluator(measured.experiment, eyes, seed=seed, pool=pool, workers=workers, memo=memo)
             progress.advance(1)
             show_after = show_before.with_base(added) if added else show_before
         progress.advance(1)
