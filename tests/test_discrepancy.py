@@ -31,14 +31,16 @@ from eyehil.analysis.discrepancy.measured import load_recordings
 from eyehil.analysis.discrepancy.metrics import Evaluator, Memo
 from eyehil.analysis.discrepancy.recording import write_recording
 from eyehil.analysis.discrepancy.report import render_markdown
-from eyehil.analysis.discrepancy.search import max_evaluations, search_effects, surrogate_minimum
+from eyehil.analysis.discrepancy.search import max_evaluations, sandwich_factor, search_effects, surrogate_minimum
 from eyehil.analysis.discrepancy.stats import (
     compare,
     gap_measure,
+    gap_terms,
     holm,
     normal_score,
     permutation_gof,
     permutation_p,
+    term_covariance,
 )
 from eyehil.analysis.discrepancy.workflow import find, hidden_measured, run_discrepancy
 from eyehil.analysis.study import experiments
@@ -379,6 +381,45 @@ def test_gap_measure_of_many_simulations_equals_compare_of_each(paired) -> None:
     D = gap_measure(sims, measured, reference)
     expected = [compare({k: v[j] for k, v in sims.items()}, measured, reference, tests=False).D for j in range(30)]
     np.testing.assert_allclose(D, expected, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("paired", [True, False])
+def test_gap_terms_square_to_the_gap_measure_and_their_bootstrap_keeps_what_units_share(paired) -> None:
+    """`gap_terms` are the signed terms of `gap_measure`'s D. Their bootstrap covariance (`term_covariance`, whole
+    eyes and subjects resampled) gives two conditions holding the same values of the same subjects a correlation of
+    1 (of independent samples with those values, the part their simulated eyes share), independent ones about 0,
+    and a condition with no gap a variance about 1 (the chi-square reading's assumptions, where they hold)."""
+    rng = np.random.default_rng(5)
+    same, other = rng.normal(1.0, 0.3, 200), rng.normal(1.0, 0.3, 200)  # many: samples nearly uncorrelated
+    conditions = {"A": MeasuredCondition.of(same), "A copy": MeasuredCondition.of(same),
+                  "B": MeasuredCondition.of(other), "S": MeasuredCondition(None, 1.0, 0.3, 30)}
+    measured = Measured("guestrin2006", conditions, tuple(map(str, range(200))) if paired else None)
+    sims = {k: rng.normal(1.0, 0.3, (6, 200)) for k in ("A", "B", "S")}
+    sims["A copy"] = sims["A"]
+    none = {}.get
+    terms = gap_terms(sims, measured, none)
+    assert terms.shape == (6, 8)
+    np.testing.assert_allclose((terms**2).sum(axis=1), gap_measure(sims, measured, none), rtol=1e-12)
+    cov = term_covariance({k: v[0] for k, v in sims.items()}, measured, none, B=400, seed=1)
+    corr = cov / np.sqrt(np.outer(np.diag(cov), np.diag(cov)))
+    if paired:  # the same subjects: A's terms and its copy's move together
+        assert corr[0, 2] == pytest.approx(1.0) and corr[1, 3] == pytest.approx(1.0)
+    else:  # independent samples of subjects, the same simulated eyes: only the eyes' half is shared
+        assert 0.35 < corr[0, 2] < 0.65  # equal spreads of eyes and subjects: half
+    assert abs(corr[0, 4]) < 0.25 and abs(corr[0, 6]) < 0.25  # A and B, A and the summary S
+    assert 0.6 < cov[0, 0] < 1.5 and 0.6 < cov[6, 6] < 1.5  # S's mean redrawn from its SD
+
+
+def test_the_sandwich_widens_an_uncertainty_by_what_a_repeated_term_counts_twice() -> None:
+    """D = |z|^2 read as a chi-square counts a term and its exact copy as two measurements: the sandwich factor
+    is sqrt 2 there, 1 for independent unit-variance terms, and 1 (the chi-square reading) where the terms do not
+    move with the parameter."""
+    u = np.linspace(-1.0, 1.0, 5)[:, None]
+    z = 0.3 + 2.0 * u
+    assert sandwich_factor(u, np.hstack([z, z]), np.ones((2, 2))) == pytest.approx([np.sqrt(2.0)])
+    assert sandwich_factor(u, np.hstack([z, 0.5 * z]), np.eye(2)) == pytest.approx([1.0])
+    assert sandwich_factor(u, np.hstack([z, -z]), 2.0 * np.eye(2)) == pytest.approx([np.sqrt(2.0)])
+    assert sandwich_factor(u, np.ones((5, 2)), np.eye(2)) == pytest.approx([1.0])
 
 
 @pytest.mark.parametrize("axes", [[np.linspace(0.0, 1.0, 5)], [np.linspace(0.0, 1.0, 3)] * 2])

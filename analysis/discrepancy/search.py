@@ -25,6 +25,14 @@ call (one batched calibration for every effect's points). Per effect, with P = 1
    its minimum (kept within that window and the range) is evaluated; the best evaluated point is the
    estimate. The curvature gives a 1-sigma uncertainty sqrt(diag(2 H_theta^-1)) (Delta D = 1, D read as
    a chi-square); NaN if the parabola is not convex or its minimum is on a bound.
+   Sandwich (`EffectSearch.correct`, `sandwich_factor`): reading D as a chi-square with one degree of freedom per
+   term takes its terms as independent with unit variance. They are not: conditions share subjects and eyes (a
+   scatter raises the error of all six Blignaut configurations together), so Delta D = 1 overstates what the
+   data pin down. The reported sigma is the curvature's times the sandwich factor sqrt(diag(V) / diag((J'J)^-1)),
+   V = (J'J)^-1 J' C J (J'J)^-1, J the terms' slope at the best point (a linear fit over the points within h),
+   C their covariance over bootstrap resamples of eyes and subjects (`stats.term_covariance`): the M-estimator's
+   sandwich variance relative to the chi-square reading's. The search itself (zooms below) uses the curvature's
+   sigma.
    Zoom: where that sigma is below h / `ZOOM_RATIO` (a parameter the data pin down far more finely than the
    last step, so D rises by more than `ZOOM_RATIO`^2 within one step and a parabola over the step misplaces
    the minimum), the refinement and the quadratic are repeated with h = max(2 sigma, h / 8) for that
@@ -44,8 +52,8 @@ effect still misfits far beyond sampling, D's scale is inflated and so is every 
 least squares with an unknown variance; the Particle Data Group's practice); and only if no fitted parameter
 ends within `EDGE` (a fraction of its range) of a bound of its plausible range (`EffectFit.at_edge`): a fit
 that wants to leave the plausible range is evidence against the effect, not a measurement of it. The reported
-1-sigma uncertainties are multiplied by s; `EffectFit.ci95` is 1.96 of them. `EffectFit.gof_p` is the goodness
-of fit of the model with the effect: P(chi-square(n - k) >= D).
+1-sigma uncertainties (the sandwich's, 3.) are multiplied by s; `EffectFit.ci95` is 1.96 of them.
+`EffectFit.gof_p` is the goodness of fit of the model with the effect: P(chi-square(n - k) >= D).
 """
 
 from __future__ import annotations
@@ -71,6 +79,10 @@ EDGE = 0.01
 Metrics = dict[str, np.ndarray]
 #: the gap measure D of P simulations at once: conditions shaped (P, E) -> (P,)
 Score = Callable[[Metrics], np.ndarray]
+#: the signed terms of D of P simulations (`stats.gap_terms`): conditions shaped (P, E) -> (P, T)
+Terms = Callable[[Metrics], np.ndarray]
+#: the covariance (T, T) of the terms of one simulation over resampled units (`stats.term_covariance`)
+Covariance = Callable[[Metrics], np.ndarray]
 
 
 @dataclass(frozen=True, eq=False)
@@ -165,7 +177,8 @@ class EffectSearch:
         self._h, self.zooms, self.walks = self.step / 2 ** REFINE[-1], 0, 0
         self._walk: tuple[np.ndarray, np.ndarray] | None = None  # the best and h of the refinement in flight
         self.surrogate: tuple[np.ndarray, float] | None = None
-        self.node_metrics: list[Metrics] = []
+        self.metrics: list[Metrics] = []  # of every evaluated point, in the order of `points`
+        self.factor = np.ones(len(params))  # `correct`: the sandwich's factor on the Delta D = 1 sigma
         self._pending: np.ndarray | None = self.coarse
         self.screened = False
 
@@ -187,6 +200,8 @@ class EffectSearch:
     def tell(self, Ds: np.ndarray, metrics: Sequence[Metrics] | None = None, score: Score | None = None) -> None:
         self.points = np.vstack([self.points, self._pending])
         self.Ds = np.concatenate([self.Ds, np.asarray(Ds, float)])
+        if metrics is not None:
+            self.metrics += list(metrics)
         self._pending = None
         if self.stage == 0:
             if metrics is not None and score is not None:
@@ -248,6 +263,24 @@ class EffectSearch:
         self.sigma, self._h = sigma, h
         return None if estimate is None else self._new(estimate[None])
 
+    def correct(self, terms: Terms, covariance: Covariance) -> None:
+        """The sandwich factor of the uncertainty (module docstring, 3.): the terms' gradient at the best point
+        from a linear fit over the evaluated points within h of it (2h, 4h while too few), their covariance there
+        by bootstrap."""
+        if self.stage <= 0 or not np.all(np.isfinite(self.sigma)) or len(self.metrics) != len(self.points):
+            return
+        i = int(np.argmin(self.Ds))
+        for width in (1.0, 2.0, 4.0):
+            u = (self.points - self.points[i]) / self._h
+            near = np.flatnonzero(np.all(np.abs(u) <= width + 1e-9, axis=1))
+            design = np.column_stack([np.ones(len(near)), u[near]])
+            if len(near) > design.shape[1] and np.linalg.matrix_rank(design) == design.shape[1]:
+                break
+        else:
+            return
+        Z = terms(stacked([self.metrics[j] for j in near]))
+        self.factor = sandwich_factor(u[near], Z, covariance(self.metrics[i]))
+
     def result(self) -> EffectFit:
         i = int(np.argmin(self.Ds))
         fitted = self.effect.fitted
@@ -260,10 +293,29 @@ class EffectSearch:
         alternatives = [{p.name: float(v) for p, v in zip(fitted, c, strict=True)} for c in self.coarse[far]]
         dof = self.n_conditions - len(fitted)
         scale = np.sqrt(max(1.0, D / dof)) if dof > 0 else 1.0
-        sigma = np.full(len(fitted), np.nan) if self.screened else self.sigma
+        sigma = np.full(len(fitted), np.nan) if self.screened else self.sigma * self.factor
         return EffectFit(self.effect, values, {p.name: float(s * scale) for p, s in zip(fitted, sigma, strict=True)},
                          float(D), float(self.D0), self.n_conditions, self.points, self.Ds, alternatives,
                          self.screened)
+
+
+def sandwich_factor(u: np.ndarray, Z: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """sqrt(diag(V) / diag((J'J)^-1)) per parameter, V = (J'J)^-1 J' cov J (J'J)^-1: the sandwich variance of the
+    minimum of D = |z|^2 against the chi-square reading's, which takes the terms z as independent with unit
+    variance (cov = I: factor 1; a term counted twice, with its copy correlated 1: factor sqrt 2). J (T, P) is
+    the slope of a linear fit of the terms `Z` (N, T) over the points' offsets `u` (N, P); ones where J'J is
+    singular or the factor is not finite."""
+    design = np.column_stack([np.ones(len(u)), u])
+    J = np.linalg.lstsq(design, Z, rcond=None)[0][1:].T
+    A = J.T @ J
+    P = A.shape[0]
+    if np.linalg.matrix_rank(A) < P:
+        return np.ones(P)
+    Ainv = np.linalg.inv(A)
+    V = Ainv @ J.T @ cov @ J @ Ainv
+    with np.errstate(invalid="ignore", divide="ignore"):
+        factor = np.sqrt(np.diag(V) / np.diag(Ainv))
+    return np.where(np.isfinite(factor) & (factor > 0), factor, 1.0)
 
 
 def surrogate_minimum(axes: list[np.ndarray], metrics: list[Metrics], score: Score,
@@ -352,10 +404,13 @@ def max_evaluations(effect: Effect, refined: bool = True) -> int:
 
 def search_effects(effects: Sequence[Effect], evaluate: Callable[[list[Applied]], list[Metrics]],
                    score: Score, D0: float, n_conditions: int, top: int = TOP,
-                   progress: Callable[[int], None] | None = None) -> list[EffectFit]:
+                   progress: Callable[[int], None] | None = None,
+                   sandwich: tuple[Terms, Covariance] | None = None) -> list[EffectFit]:
     """Fit every effect (module docstring); `evaluate(applied list)` returns the conditions of each applied
     effect (one batch per stage), `score(conditions)` the D of each (conditions of P simulations, each (P, E), ->
-    (P,): a batch's nodes and a surrogate grid are scored in one call); `progress(n)` after each batch."""
+    (P,): a batch's nodes and a surrogate grid are scored in one call); `progress(n)` after each batch;
+    `sandwich` (the terms of D and their covariance) corrects the refined fits' uncertainties
+    (`EffectSearch.correct`)."""
     searches = [EffectSearch(e, D0, n_conditions) for e in effects]
     waves = 0  # of refinements after the first (module docstring, 2.)
     while True:
@@ -383,4 +438,7 @@ def search_effects(effects: Sequence[Effect], evaluate: Callable[[list[Applied]]
             part = metrics[start:start + len(pts)]
             s.tell(score(stacked(part)), part, score)
             start += len(pts)
+    if sandwich is not None:
+        for s in searches:
+            s.correct(*sandwich)
     return [s.result() for s in searches]

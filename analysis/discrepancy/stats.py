@@ -64,6 +64,7 @@ from eyehil.analysis.study.stats import welch_t_test_from_stats
 SD_FLOOR = 1e-4
 PERMUTATIONS = 4000
 GOF_PERMUTATIONS = 200
+BOOTSTRAP = 200  # resamples of `term_covariance`
 
 
 @dataclass(frozen=True)
@@ -201,44 +202,99 @@ def gap_measure(simulated: Mapping[str, np.ndarray], measured: Measured,
     simulations; returns (P,) equal to `compare(..., tests=False).D` of each row (NaN where a row has fewer
     than 2 finite eyes). The search scores its dense surrogate grids with it."""
     D = None
-    for name, cond in measured.conditions.items():
-        if name not in simulated:
-            raise ValueError(f"the simulation has no condition {name!r}; it has {', '.join(simulated)}")
-        ref = reference(name)
-        paired = measured.paired and cond.values is not None and ref in measured.conditions and \
-            measured.conditions[ref].values is not None
-        sim = np.asarray(simulated[name], float) - (np.asarray(simulated[ref], float) if paired else 0.0)
-        sim = np.atleast_2d(sim)
-        finite = np.isfinite(sim)
-        n = finite.sum(axis=1)
-        x = np.where(finite, sim, 0.0)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            mean = x.sum(axis=1) / n
-            dev = np.where(finite, sim - mean[:, None], 0.0)
-            s_sd = np.maximum(np.sqrt((dev**2).sum(axis=1) / (n - 1)), SD_FLOOR)
-            s_sd = np.where(n >= 2, s_sd, np.nan)
-            if cond.values is None and cond.sd is None:
-                df = n - 1.0
-                term = normal_scores((mean - cond.mean) / (s_sd / np.sqrt(n)), df) ** 2
-            else:
-                meas = cond.values - measured.conditions[ref].values if paired else cond.values
-                m_mean = float(meas.mean()) if meas is not None else cond.mean
-                m_sd = max(float(meas.std(ddof=1)) if meas is not None else float(cond.sd), SD_FLOOR)
-                m_n = meas.size if meas is not None else cond.n
-                v1, v2 = s_sd**2 / n, m_sd**2 / m_n
-                t = (mean - m_mean) / np.sqrt(v1 + v2)
-                df = (v1 + v2) ** 2 / (v1**2 / (n - 1) + v2**2 / (m_n - 1))
-                m2, m4 = (dev**2).sum(axis=1), (dev**4).sum(axis=1)
-                count = n.astype(float)
-                if meas is not None:
-                    centred = meas - meas.mean()
-                    m2, m4, count = m2 + np.sum(centred**2), m4 + np.sum(centred**4), count + meas.size
-                m2, m4 = m2 / count, m4 / count
-                g2 = np.where(m2 > 0, np.maximum(0.0, m4 / np.where(m2 > 0, m2, 1.0) ** 2 - 3.0), 0.0)
-                z_spread = np.log(s_sd / m_sd) / log_sd_se(n, m_n, g2)
-                term = normal_scores(t, df) ** 2 + np.where(np.isnan(z_spread), 0.0, z_spread**2)
+    for name in measured.conditions:
+        z_mean, z_spread = _condition_terms(name, simulated, measured, reference)
+        term = z_mean**2 + np.where(np.isnan(z_spread), 0.0, z_spread**2)
         D = term if D is None else D + term
     return np.asarray(D, float)
+
+
+def gap_terms(simulated: Mapping[str, np.ndarray], measured: Measured,
+              reference: Callable[[str], str | None], rows: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
+    """The signed normal scores whose squares sum to D (`gap_measure`), (P, 2 C): the mean and the spread term of
+    each of the C measured conditions, in order (0 where a condition has no spread term). `rows` maps a condition
+    with per-subject values to (P, S) indices into them: the measured subjects of each row (`term_covariance`)."""
+    out = []
+    for name in measured.conditions:
+        z_mean, z_spread = _condition_terms(name, simulated, measured, reference, (rows or {}).get(name))
+        out += [z_mean, np.where(np.isnan(z_spread), 0.0, z_spread)]
+    return np.column_stack(out)
+
+
+def term_covariance(simulated: Mapping[str, np.ndarray], measured: Measured, reference: Callable[[str], str | None],
+                    *, B: int = BOOTSTRAP, seed: int = 0) -> np.ndarray:
+    """Covariance (2 C, 2 C) of the terms of `gap_terms` of one simulation (`simulated`: (E,) per condition) over
+    `B` bootstrap resamples of whole units: the simulated eyes (jointly across conditions), and the measured
+    subjects (jointly when the data are paired, so the terms' correlation through shared subjects is kept; each
+    list on its own when they are independent samples). A summary condition with
+    an SD has its mean redrawn from N(mean, sd^2 / n); one without an SD stays fixed. Under "no gap" a term's
+    variance is about 1 and two conditions of the same subjects correlate: what the chi-square reading of D and its
+    Delta D = 1 uncertainties assume away (`search.sandwich_factor`)."""
+    rng = np.random.default_rng(seed)
+    one = {k: np.asarray(v, float).ravel() for k, v in simulated.items()}
+    E = len(next(iter(one.values())))
+    eyes = rng.integers(0, E, size=(B, E))
+    listed = {name: c.values.size for name, c in measured.conditions.items() if c.values is not None}
+    if measured.paired and listed:  # one draw of subjects for every condition
+        joint = rng.integers(0, len(measured.subjects), size=(B, len(measured.subjects)))
+        rows = dict.fromkeys(listed, joint)
+    else:  # independent samples
+        rows = {name: rng.integers(0, size, size=(B, size)) for name, size in listed.items()}
+    redrawn = {name: replace(c, mean=c.mean + float(c.sd) / np.sqrt(c.n) * rng.standard_normal(B))
+               for name, c in measured.conditions.items() if c.values is None and c.sd is not None}
+    terms = gap_terms({k: v[eyes] for k, v in one.items()}, replace(measured, conditions={
+        **measured.conditions, **redrawn}), reference, rows)
+    return np.cov(terms, rowvar=False)
+
+
+def _condition_terms(name: str, simulated: Mapping[str, np.ndarray], measured: Measured,
+                     reference: Callable[[str], str | None],
+                     rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The mean and spread normal scores (P,) of one condition (module docstring; the spread NaN where it has no
+    term); `rows` (P, S): the measured subjects of each row; a summary's `mean` may be an array (P,)."""
+    if name not in simulated:
+        raise ValueError(f"the simulation has no condition {name!r}; it has {', '.join(simulated)}")
+    cond = measured.conditions[name]
+    ref = reference(name)
+    paired = measured.paired and cond.values is not None and ref in measured.conditions and \
+        measured.conditions[ref].values is not None
+    sim = np.asarray(simulated[name], float) - (np.asarray(simulated[ref], float) if paired else 0.0)
+    sim = np.atleast_2d(sim)
+    finite = np.isfinite(sim)
+    n = finite.sum(axis=1)
+    x = np.where(finite, sim, 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = x.sum(axis=1) / n
+        dev = np.where(finite, sim - mean[:, None], 0.0)
+        s_sd = np.maximum(np.sqrt((dev**2).sum(axis=1) / (n - 1)), SD_FLOOR)
+        s_sd = np.where(n >= 2, s_sd, np.nan)
+        if cond.values is None and cond.sd is None:
+            df = n - 1.0
+            return normal_scores((mean - cond.mean) / (s_sd / np.sqrt(n)), df), np.full(len(sim), np.nan)
+        meas = cond.values - measured.conditions[ref].values if paired else cond.values
+        if meas is not None and rows is not None:
+            meas = meas[rows]  # (P, S)
+            m_mean = meas.mean(axis=1)
+            m_sd = np.maximum(meas.std(axis=1, ddof=1), SD_FLOOR)
+            m_n = meas.shape[1]
+        else:
+            m_mean = float(meas.mean()) if meas is not None else cond.mean
+            m_sd = max(float(meas.std(ddof=1)) if meas is not None else float(cond.sd), SD_FLOOR)
+            m_n = meas.size if meas is not None else cond.n
+        v1, v2 = s_sd**2 / n, m_sd**2 / m_n
+        t = (mean - m_mean) / np.sqrt(v1 + v2)
+        df = (v1 + v2) ** 2 / (v1**2 / (n - 1) + v2**2 / (m_n - 1))
+        m2, m4 = (dev**2).sum(axis=1), (dev**4).sum(axis=1)
+        count = n.astype(float)
+        if meas is not None:
+            centred = meas - (meas.mean(axis=-1, keepdims=True) if meas.ndim == 2 else meas.mean())
+            m2 = m2 + (np.sum(centred**2, axis=-1) if meas.ndim == 2 else np.sum(centred**2))
+            m4 = m4 + (np.sum(centred**4, axis=-1) if meas.ndim == 2 else np.sum(centred**4))
+            count = count + meas.shape[-1]
+        m2, m4 = m2 / count, m4 / count
+        g2 = np.where(m2 > 0, np.maximum(0.0, m4 / np.where(m2 > 0, m2, 1.0) ** 2 - 3.0), 0.0)
+        z_spread = np.log(s_sd / m_sd) / log_sd_se(n, m_n, g2)
+        return normal_scores(t, df), z_spread
 
 
 def _gap(name: str, simulated: Mapping[str, np.ndarray], measured: Measured, reference, tests: bool) -> ConditionGap:

@@ -64,7 +64,14 @@ import scipy.stats as sps
 from eyehil.analysis.discrepancy.data import Measured, MeasuredCondition
 from eyehil.analysis.discrepancy.metrics import Evaluator, Memo
 from eyehil.analysis.discrepancy.search import TOP, EffectFit, max_evaluations, search_effects
-from eyehil.analysis.discrepancy.stats import Comparison, compare, gap_measure, permutation_gof
+from eyehil.analysis.discrepancy.stats import (
+    Comparison,
+    compare,
+    gap_measure,
+    gap_terms,
+    permutation_gof,
+    term_covariance,
+)
 from eyehil.emulator import effects as registry
 from eyehil.emulator.effects import Applied, Effect
 from eyehil.emulator.eye.model import EyeModel
@@ -236,7 +243,14 @@ def name_effects(evaluator: Evaluator, measured: Measured, before: Comparison, e
             progress.advance(len(batch[i:i + CHUNK]))
         return out
 
-    fits = search_effects(candidates(evaluator, effect_names), evaluate, score, before.D, before.n_terms)
+    def terms(metrics) -> np.ndarray:
+        return gap_terms(metrics, measured, evaluator.experiment.reference)
+
+    def covariance(metrics) -> np.ndarray:
+        return term_covariance(metrics, measured, evaluator.experiment.reference)
+
+    fits = search_effects(candidates(evaluator, effect_names), evaluate, score, before.D, before.n_terms,
+                          sandwich=(terms, covariance))
     return sorted(fits, key=lambda f: (f.screened, f.score))
 
 
