@@ -1,9 +1,10 @@
-"""Shared fixtures: a few eyes and the scene presets."""
+"""Shared fixtures: a few eyes and the scene presets; the blind trials' measured rates in the run's summary."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from blind_rates import summarise
 
 from eyehil.emulator.eye.biometry import eye_from_biometry
 from eyehil.emulator.eye.model import EyeModel
@@ -24,3 +25,8 @@ def make_eyes(n: int = 4, seed: int = 0) -> EyeModel:
 @pytest.fixture
 def eyes() -> EyeModel:
     return make_eyes()
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
+    """The blind trials' rates of every setting that ran, passed or not: the run's record of what was measured."""
+    summarise(terminalreporter, config)

@@ -56,7 +56,7 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 from scipy import stats as sps
 
-from eyehil.analysis.discrepancy.data import Measured
+from eyehil.analysis.discrepancy.data import Measured, MeasuredCondition
 from eyehil.analysis.study.stats import welch_t_test_from_stats
 
 #: The resolution of every compared quantity, in its own unit (deg of gaze error, px of a feature, or a ratio):
@@ -247,18 +247,26 @@ def term_covariance(simulated: Mapping[str, np.ndarray], measured: Measured, ref
     return np.cov(terms, rowvar=False)
 
 
-def _condition_terms(name: str, simulated: Mapping[str, np.ndarray], measured: Measured,
-                     reference: Callable[[str], str | None],
-                     rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The mean and spread normal scores (P,) of one condition (module docstring; the spread NaN where it has no
-    term); `rows` (P, S): the measured subjects of each row; a summary's `mean` may be an array (P,)."""
+def _compared(name: str, simulated: Mapping[str, np.ndarray], measured: Measured,
+              reference: Callable[[str], str | None]) -> tuple[MeasuredCondition, str | None, bool, np.ndarray]:
+    """One condition's measured data, its reference, whether it is compared as a paired contrast, and the simulated
+    values compared (the contrast with the reference where paired; module docstring)."""
     if name not in simulated:
         raise ValueError(f"the simulation has no condition {name!r}; it has {', '.join(simulated)}")
     cond = measured.conditions[name]
     ref = reference(name)
     paired = measured.paired and cond.values is not None and ref in measured.conditions and \
         measured.conditions[ref].values is not None
-    sim = np.asarray(simulated[name], float) - (np.asarray(simulated[ref], float) if paired else 0.0)
+    return cond, ref, paired, np.asarray(simulated[name], float) - (np.asarray(simulated[ref], float) if paired
+                                                                    else 0.0)
+
+
+def _condition_terms(name: str, simulated: Mapping[str, np.ndarray], measured: Measured,
+                     reference: Callable[[str], str | None],
+                     rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The mean and spread normal scores (P,) of one condition (module docstring; the spread NaN where it has no
+    term); `rows` (P, S): the measured subjects of each row; a summary's `mean` may be an array (P,)."""
+    cond, ref, paired, sim = _compared(name, simulated, measured, reference)
     sim = np.atleast_2d(sim)
     finite = np.isfinite(sim)
     n = finite.sum(axis=1)
@@ -298,13 +306,7 @@ def _condition_terms(name: str, simulated: Mapping[str, np.ndarray], measured: M
 
 
 def _gap(name: str, simulated: Mapping[str, np.ndarray], measured: Measured, reference, tests: bool) -> ConditionGap:
-    if name not in simulated:
-        raise ValueError(f"the simulation has no condition {name!r}; it has {', '.join(simulated)}")
-    cond = measured.conditions[name]
-    ref = reference(name)
-    paired = measured.paired and cond.values is not None and ref in measured.conditions and \
-        measured.conditions[ref].values is not None
-    sim = np.asarray(simulated[name], float) - (np.asarray(simulated[ref], float) if paired else 0.0)
+    cond, ref, paired, sim = _compared(name, simulated, measured, reference)
     sim = sim[np.isfinite(sim)]
     if sim.size < 2:
         raise ValueError(f"condition {name!r}: fewer than 2 simulated eyes with a finite value")
@@ -366,8 +368,6 @@ def permutation_gof(simulated: Mapping[str, np.ndarray], measured: Measured, ref
                     D: float, *, B: int = GOF_PERMUTATIONS, seed: int = 0) -> float | None:
     """P(D* >= D) under relabelling of whole units between simulated eyes and measured subjects (module
     docstring); None unless every measured condition has per-subject values."""
-    from eyehil.analysis.discrepancy.data import MeasuredCondition
-
     if any(c.values is None for c in measured.conditions.values()):
         return None
     keys = list(dict.fromkeys([*measured.conditions, *(r for c in measured.conditions if (r := reference(c))
