@@ -270,16 +270,13 @@ class EffectSearch:
         if self.stage <= 0 or not np.all(np.isfinite(self.sigma)) or len(self.metrics) != len(self.points):
             return
         i = int(np.argmin(self.Ds))
-        for width in (1.0, 2.0, 4.0):
-            u = (self.points - self.points[i]) / self._h
-            near = np.flatnonzero(np.all(np.abs(u) <= width + 1e-9, axis=1))
-            design = np.column_stack([np.ones(len(near)), u[near]])
-            if len(near) > design.shape[1] and np.linalg.matrix_rank(design) == design.shape[1]:
-                break
-        else:
+        found = _window(self.points, self.points[i], self._h, lambda u: np.column_stack([np.ones(len(u)), u]),
+                        spare=1)
+        if found is None:
             return
-        Z = terms(stacked([self.metrics[j] for j in near]))
-        self.factor = sandwich_factor(u[near], Z, covariance(self.metrics[i]))
+        near, u, _, _ = found
+        Z = terms(stacked([self.metrics[j] for j in np.flatnonzero(near)]))
+        self.factor = sandwich_factor(u, Z, covariance(self.metrics[i]))
 
     def result(self) -> EffectFit:
         i = int(np.argmin(self.Ds))
@@ -363,21 +360,31 @@ def _lagrange(nodes: np.ndarray, x: np.ndarray) -> np.ndarray:
     return out
 
 
+def _window(points: np.ndarray, best: np.ndarray, h: np.ndarray, design: Callable[[np.ndarray], np.ndarray],
+            spare: int = 0) -> tuple[np.ndarray, np.ndarray, float, np.ndarray] | None:
+    """The evaluated points within h of `best` (widened to 2h, 4h while too few): (mask, offsets u in units of h,
+    width, design(u)) for the first width where `design(u)` has full column rank with at least `spare` more rows
+    than columns; None if none has."""
+    for width in (1.0, 2.0, 4.0):
+        u = (points - best) / h
+        near = np.all(np.abs(u) <= width + 1e-9, axis=1)
+        X = design(u[near])
+        if near.sum() >= X.shape[1] + spare and np.linalg.matrix_rank(X) == X.shape[1]:
+            return near, u[near], width, X
+    return None
+
+
 def quadratic_minimum(points, Ds, best, h, lo, hi) -> tuple[np.ndarray | None, np.ndarray]:
     """Minimum of a quadratic fitted to the points within h of `best` (widened to 2h, 4h while too few
     for the fit), and its 1-sigma (Delta D = 1); (None, NaN) if not convex."""
     P = len(best)
     pairs = [(a, b) for a in range(P) for b in range(a, P)]
-    for width in (1.0, 2.0, 4.0):
-        u = (points - best) / h
-        near = np.all(np.abs(u) <= width + 1e-9, axis=1)
-        u, d = u[near], Ds[near]
-        design = np.column_stack([np.ones(len(u)), u, *[u[:, a] * u[:, b] for a, b in pairs]])
-        if len(u) >= design.shape[1] and np.linalg.matrix_rank(design) == design.shape[1]:
-            break
-    else:
+    found = _window(points, best, h,
+                    lambda u: np.column_stack([np.ones(len(u)), u, *[u[:, a] * u[:, b] for a, b in pairs]]))
+    if found is None:
         return None, np.full(P, np.nan)
-    coef = np.linalg.lstsq(design, d, rcond=None)[0]
+    near, _, width, design = found
+    coef = np.linalg.lstsq(design, Ds[near], rcond=None)[0]
     g, H = coef[1:P + 1], np.zeros((P, P))
     for (a, b), c in zip(pairs, coef[P + 1:], strict=True):
         H[a, b] = H[b, a] = 2 * c if a == b else c

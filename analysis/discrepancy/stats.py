@@ -226,8 +226,8 @@ def term_covariance(simulated: Mapping[str, np.ndarray], measured: Measured, ref
     """Covariance (2 C, 2 C) of the terms of `gap_terms` of one simulation (`simulated`: (E,) per condition) over
     `B` bootstrap resamples of whole units: the simulated eyes (jointly across conditions), and the measured
     subjects (jointly when the data are paired, so the terms' correlation through shared subjects is kept; each
-    list on its own when they are independent samples). A summary condition with
-    an SD has its mean redrawn from N(mean, sd^2 / n); one without an SD stays fixed. Under "no gap" a term's
+    list on its own when they are independent samples). A summary condition with an SD has its mean redrawn from
+    N(mean, sd^2 / n); one without an SD stays fixed. Under "no gap" a term's
     variance is about 1 and two conditions of the same subjects correlate: what the chi-square reading of D and its
     Delta D = 1 uncertainties assume away (`search.sandwich_factor`)."""
     rng = np.random.default_rng(seed)
@@ -280,25 +280,20 @@ def _condition_terms(name: str, simulated: Mapping[str, np.ndarray], measured: M
             df = n - 1.0
             return normal_scores((mean - cond.mean) / (s_sd / np.sqrt(n)), df), np.full(len(sim), np.nan)
         meas = cond.values - measured.conditions[ref].values if paired else cond.values
-        if meas is not None and rows is not None:
-            meas = meas[rows]  # (P, S)
-            m_mean = meas.mean(axis=1)
-            m_sd = np.maximum(meas.std(axis=1, ddof=1), SD_FLOOR)
-            m_n = meas.shape[1]
+        if meas is not None:
+            meas = meas[rows] if rows is not None else meas  # (P, S) or (S,)
+            m_mean, m_n = meas.mean(axis=-1), meas.shape[-1]
+            m_sd = np.maximum(meas.std(axis=-1, ddof=1), SD_FLOOR)
         else:
-            m_mean = float(meas.mean()) if meas is not None else cond.mean
-            m_sd = max(float(meas.std(ddof=1)) if meas is not None else float(cond.sd), SD_FLOOR)
-            m_n = meas.size if meas is not None else cond.n
+            m_mean, m_sd, m_n = cond.mean, max(float(cond.sd), SD_FLOOR), cond.n
         v1, v2 = s_sd**2 / n, m_sd**2 / m_n
         t = (mean - m_mean) / np.sqrt(v1 + v2)
         df = (v1 + v2) ** 2 / (v1**2 / (n - 1) + v2**2 / (m_n - 1))
         m2, m4 = (dev**2).sum(axis=1), (dev**4).sum(axis=1)
         count = n.astype(float)
         if meas is not None:
-            centred = meas - (meas.mean(axis=-1, keepdims=True) if meas.ndim == 2 else meas.mean())
-            m2 = m2 + (np.sum(centred**2, axis=-1) if meas.ndim == 2 else np.sum(centred**2))
-            m4 = m4 + (np.sum(centred**4, axis=-1) if meas.ndim == 2 else np.sum(centred**4))
-            count = count + meas.shape[-1]
+            centred = meas - meas.mean(axis=-1, keepdims=True)
+            m2, m4, count = m2 + np.sum(centred**2, axis=-1), m4 + np.sum(centred**4, axis=-1), count + m_n
         m2, m4 = m2 / count, m4 / count
         g2 = np.where(m2 > 0, np.maximum(0.0, m4 / np.where(m2 > 0, m2, 1.0) ** 2 - 3.0), 0.0)
         z_spread = np.log(s_sd / m_sd) / log_sd_se(n, m_n, g2)

@@ -31,6 +31,7 @@ evaluated once per process, and a trial's record is the same as without it.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import time
 from pathlib import Path
@@ -38,17 +39,14 @@ from pathlib import Path
 import numpy as np
 
 LOW, HIGH = 0.4, 0.9
-_memo = None  # this process's `Memo` of evaluated points (`memo()`)
 
 
+@functools.cache
 def memo():
     """This process's `Memo` of the workflow's evaluated points, shared by its trials (module docstring)."""
-    global _memo
-    if _memo is None:
-        from eyehil.analysis.discrepancy.metrics import Memo
+    from eyehil.analysis.discrepancy.metrics import Memo
 
-        _memo = Memo()
-    return _memo
+    return Memo()
 
 
 def draw(effect, rng: np.random.Generator) -> dict[str, float]:
