@@ -103,7 +103,7 @@ def test_glint_occlusion_pulls_the_pupil_away_from_the_glint_whatever_the_traced
     """The occlusion reads the pupil's edge from its fitted ellipse, so the shift does not depend on how many
     boundary points were ray-traced (the discrepancy search traces fewer than a default run)."""
     eyes = published_eyes()[:10]
-    occluded = effects.parse("glint_occlusion=1")
+    occluded = effects.parse("glint_occlusion=1,4")
     shifts = []
     for points in (12, 30):
         plain = simulate(eyes, scene, n_pupil_points=points)
@@ -116,6 +116,20 @@ def test_glint_occlusion_pulls_the_pupil_away_from_the_glint_whatever_the_traced
     on_edge = np.argmin(np.abs(np.linalg.norm(away, axis=-1) - plain.pupil_axes_px[..., :1] / 2), axis=-1)
     nearest = np.take_along_axis(away, on_edge[..., None, None], axis=-2)[..., 0, :]  # the glint nearest the edge
     assert np.all(np.sum(shifts[1][hit] * nearest[hit], axis=-1) > 0)
+
+
+def test_a_larger_glint_disc_reaches_more_fixations_and_pulls_further(scene) -> None:
+    """The radius is fitted beside the bias: it sets how many fixations' glints meet the pupil's edge and how far
+    the centre moves, so it is not a second name for the bias."""
+    eyes = published_eyes()[:10]
+    plain = simulate(eyes, scene)
+    shift = {r: np.linalg.norm(simulate_with(eyes, scene, [effects.parse(f"glint_occlusion=1,{r}")]).pupil_centre_px
+                               - plain.pupil_centre_px, axis=-1) for r in (2, 8)}
+    hit = {r: shift[r] > 1e-6 for r in shift}
+    assert 0 < hit[2].sum() < hit[8].sum() and np.all(hit[8][hit[2]])  # what a small disc reaches, a large does
+    assert np.median(shift[8][hit[2]]) > np.median(shift[2][hit[2]])
+    half = simulate_with(eyes, scene, [effects.parse("glint_occlusion=0.5,8")]).pupil_centre_px - plain.pupil_centre_px
+    np.testing.assert_allclose(np.linalg.norm(half, axis=-1), shift[8] / 2, atol=1e-9)  # the bias only scales
 
 
 def test_effect_specs_parse_and_refuse() -> None:
@@ -747,6 +761,22 @@ def test_blind_trials_can_draw_their_model_eyes_from_the_hidden_eyes_population(
     assert np.array_equal(model_eyes("rozema", 5, 0).anterior_radius, drawn.anterior_radius)
     with pytest.raises(ValueError, match="model eyes"):
         model_eyes("mine", 5, 0)
+
+
+def test_blind_trials_draw_strengths_inside_the_plausible_range() -> None:
+    """A strength is 40-90 % of the way from neutral to a bound; a parameter whose neutral is outside its range
+    (glint occlusion's radius: the bias switches the effect off) is drawn over the middle of its range."""
+    from eyehil.analysis.discrepancy.trials import HIGH, INNER, LOW, draw
+
+    rng = np.random.default_rng(0)
+    occlusion, noise = effects.get("glint_occlusion"), effects.get("feature_noise")
+    radius, sigma = occlusion.parameter("radius_px"), noise.parameter("sigma_px")
+    radii = np.array([draw(occlusion, rng)["radius_px"] for _ in range(200)])
+    margin = (1 - INNER) / 2 * (radius.high - radius.low)
+    assert radius.low + margin <= radii.min() and radii.max() <= radius.high - margin
+    assert np.ptp(radii) > 0.8 * INNER * (radius.high - radius.low)  # spread over the middle, not a corner
+    sigmas = np.array([draw(noise, rng)["sigma_px"] for _ in range(200)])
+    assert LOW * sigma.high <= sigmas.min() and sigmas.max() <= HIGH * sigma.high
 
 
 def test_the_scatter_conditions_tell_feature_noise_from_eye_and_head_movement(scene) -> None:

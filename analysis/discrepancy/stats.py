@@ -227,9 +227,9 @@ def term_covariance(simulated: Mapping[str, np.ndarray], measured: Measured, ref
     `B` bootstrap resamples of whole units: the simulated eyes (jointly across conditions), and the measured
     subjects (jointly when the data are paired, so the terms' correlation through shared subjects is kept; each
     list on its own when they are independent samples). A summary condition with an SD has its mean redrawn from
-    N(mean, sd^2 / n); one without an SD stays fixed. Under "no gap" a term's
-    variance is about 1 and two conditions of the same subjects correlate: what the chi-square reading of D and its
-    Delta D = 1 uncertainties assume away (`search.sandwich_factor`)."""
+    N(mean, sd^2 / n); one without an SD stays fixed. Under "no gap" a term's variance is about 1 and two conditions
+    of the same subjects correlate: what the chi-square reading of D and its Delta D = 1 uncertainties assume away
+    (`search.sandwich_factor`)."""
     rng = np.random.default_rng(seed)
     one = {k: np.asarray(v, float).ravel() for k, v in simulated.items()}
     E = len(next(iter(one.values())))

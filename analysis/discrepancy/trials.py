@@ -5,7 +5,9 @@ Each trial draws "measured" data from other eyes (a Rozema 2011 draw) with hidde
 workflow blind on the first `search_eyes` published eyes (show: the first `show_eyes`):
 
 - single: one effect of the catalogue (every effect in turn, cycling), strength drawn uniformly between
-  `LOW` and `HIGH` of the way from its neutral value to a bound of its plausible range (random side);
+  `LOW` and `HIGH` of the way from its neutral value to a bound of its plausible range (random side); a
+  parameter whose neutral value lies outside its range (another parameter switches the effect off: glint
+  occlusion's radius) uniformly over the middle `INNER` of its range;
 - pair: two different effects, each drawn so; the larger is the one that opens the larger gap alone (`sizes`:
   D of data with that effect alone, simulated on the same hidden eyes, against the search eyes' model
   without effects);
@@ -39,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 LOW, HIGH = 0.4, 0.9
+INNER = 0.8  # the middle of the range drawn for a parameter whose neutral value is outside it
 
 
 @functools.cache
@@ -50,12 +53,16 @@ def memo():
 
 
 def draw(effect, rng: np.random.Generator) -> dict[str, float]:
-    """Random fitted-parameter values: between LOW and HIGH of the way from neutral to a bound."""
+    """Random fitted-parameter values: between LOW and HIGH of the way from neutral to a bound, or uniform over the
+    middle INNER of the range where neutral is outside it."""
     out = {}
     for p in effect.fitted:
-        sides = [b for b in (p.low, p.high) if b != p.neutral]
-        bound = sides[rng.integers(len(sides))]
-        out[p.name] = float(p.neutral + rng.uniform(LOW, HIGH) * (bound - p.neutral))
+        if p.switches_off:
+            sides = [b for b in (p.low, p.high) if b != p.neutral]
+            bound = sides[rng.integers(len(sides))]
+            out[p.name] = float(p.neutral + rng.uniform(LOW, HIGH) * (bound - p.neutral))
+        else:
+            out[p.name] = float(p.low + (p.high - p.low) * rng.uniform((1 - INNER) / 2, (1 + INNER) / 2))
     return out
 
 

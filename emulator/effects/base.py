@@ -52,7 +52,8 @@ REGISTRY: dict[str, type[Effect]] = {}
 class Parameter:
     """One parameter: name, unit, default (the value it takes unless given), plausible range [low, high],
     the value at which the effect does nothing (`neutral`), whether the discrepancy search fits it, and a
-    one-line meaning."""
+    one-line meaning. `neutral` lies outside [low, high] for a parameter that shapes an effect another parameter
+    switches off (glint occlusion's radius: its bias)."""
 
     name: str
     unit: str
@@ -62,6 +63,11 @@ class Parameter:
     neutral: float = 0.0
     fitted: bool = True
     doc: str = ""
+
+    @property
+    def switches_off(self) -> bool:
+        """Whether this parameter alone can switch the effect off: its neutral value is inside [low, high]."""
+        return self.low <= self.neutral <= self.high
 
 
 class Effect:

@@ -13,6 +13,14 @@ centroid, or an ellipse fit without robust outlier handling pulled by the gap) m
 gap (Swirski, Bulling & Dodgson 2012, ETRA'12 173-176; Santini, Fuhl & Kasneci 2018, CVIU 170:40-50:
 occlusion by glints is the commonest failure of pupil detection). The shift is zero unless a glint is on
 the edge, so it acts at some targets and head positions only, in the direction away from the glint.
+
+Both parameters are fitted. A glint's bright disc (its radius in the image: LED power, exposure, the
+threshold of the detector) is as unknown for a real tracker as the detector's bias, and the radius sets the
+share of eyes and fixations whose glint meets the pupil's edge: with the radius fixed, a sample of model eyes
+with fewer such eyes than the measured ones can only match the data with a bias beyond 1 (Blignaut 2014: 31 %
+of 16 model eyes against 45-80 % in 20-eye Rozema draws, docs/discrepancy.md, 19th session). The radius's
+`neutral` is 0 (a disc of no size hides nothing), outside its plausible range: the effect is switched off by
+its bias.
 """
 
 from __future__ import annotations
@@ -29,15 +37,16 @@ EDGE_SAMPLES = 120
 
 
 class GlintOcclusion(Effect):
-    """The pupil centre pulled away from a glint that hides part of the pupil's edge (bias, 0..1)."""
+    """The pupil centre pulled away from a glint that hides part of the pupil's edge (bias 0..1, glint radius)."""
 
     name = "glint_occlusion"
     stage = "features"
     reference = "Swirski, Bulling & Dodgson 2012, ETRA'12 173-176; Santini, Fuhl & Kasneci 2018, CVIU 170:40-50"
-    prior = "0 for robust ellipse fitting, up to 1 for centroid detectors"
+    prior = ("bias 0 for robust ellipse fitting, up to 1 for centroid detectors; radius a few px, set by LED power, "
+             "exposure and the detector's threshold (no published spread)")
     parameters = (
         Parameter("bias", "", 0.0, 0.0, 1.0, neutral=0.0, doc="fraction of the visible-edge centroid's shift"),
-        Parameter("radius_px", "px", 4.0, 0.5, 20.0, fitted=False, doc="radius of a glint's bright disc"),
+        Parameter("radius_px", "px", 4.0, 1.0, 10.0, neutral=0.0, doc="radius of a glint's bright disc"),
     )
 
     def perturb(self, features: Features, values: Mapping[str, float], rng: np.random.Generator | None,
