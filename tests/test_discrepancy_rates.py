@@ -7,7 +7,7 @@ In each setting every effect of the experiment's catalogue (`trials.catalogue`) 
 in data from 20 hidden eyes of a Rozema 2011 draw; 10 random pairs; 4 negative controls; 4 effects hidden and removed,
 with their twins (`Effect.twins`, `trials.outside`), from the catalogue the workflow may choose from. The workflow runs
 blind on model eyes of their own (a Rozema draw, 16 search eyes, 20 show eyes), the settings of docs/discrepancy.md's
-rates. The trials are seeded: the rates are those of the record in docs/discrepancy.md, and a change of the workflow
+rates. The trials are seeded: the rates are those of docs/discrepancy.md ("Rates now"), and a change of the workflow
 that moves one shows here. A rate a setting does not reach is a strict xfail saying why (`SHORT`): reaching it fails the
 test, so the record is kept true. Up to 20 minutes of CPU a setting (Blignaut 2014 tables: 5), run in two processes
 (`trials.run_trials`), whose trials share each process's memo of evaluated points (`trials.memo`).
@@ -29,7 +29,7 @@ SETTINGS = {
 }
 COUNTS = {"pair": 10, "negative": 4, "outside": 4}
 
-#: (setting, rate) -> why the setting does not reach the issue's target (docs/discrepancy.md, 18th and 19th sessions)
+#: (setting, rate) -> why the setting misses the issue's target (docs/discrepancy.md, "Rates now"; docs/blind-trials.md)
 SHORT: dict[tuple[str, str], str] = {
     ("blignaut2014-recordings", "singles_named"): (
         "9 of 17, 9 of the 13 visible: at one head position the corneal index, tangential distortion, camera pose "

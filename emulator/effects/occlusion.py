@@ -18,7 +18,7 @@ Both parameters are fitted. A glint's bright disc (its radius in the image: LED 
 threshold of the detector) is as unknown for a real tracker as the detector's bias, and the radius sets the
 share of eyes and fixations whose glint meets the pupil's edge: with the radius fixed, a sample of model eyes
 with fewer such eyes than the measured ones can only match the data with a bias beyond 1 (Blignaut 2014: 31 %
-of 16 model eyes against 45-80 % in 20-eye Rozema draws, docs/discrepancy.md, 19th session). The radius's
+of 16 model eyes against 45-80 % in 20-eye Rozema draws, docs/blind-trials.md, 19th session). The radius's
 `neutral` is 0 (a disc of no size hides nothing), outside its plausible range: the effect is switched off by
 its bias.
 """
