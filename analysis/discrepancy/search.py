@@ -31,8 +31,15 @@ call (one batched calibration for every effect's points). Per effect, with P = 1
    data pin down. The reported sigma is the curvature's times the sandwich factor sqrt(diag(V) / diag((J'J)^-1)),
    V = (J'J)^-1 J' C J (J'J)^-1, J the terms' slope at the best point (a linear fit over the points within h),
    C their covariance over bootstrap resamples of eyes and subjects (`stats.term_covariance`): the M-estimator's
-   sandwich variance relative to the chi-square reading's. The search itself (zooms below) uses the curvature's
-   sigma.
+   sandwich variance relative to the chi-square reading's. Both read D near its minimum only. Where the valley of D
+   is long and curved, or the parameters act on some eyes only (glint occlusion's radius sets which eyes a glint
+   reaches, a share that differs between two samples of eyes), the estimate moves between samples far more than
+   the curvature says. So the reported sigma is the larger of that and the spread of the minimum over resamples
+   (`EffectSearch.correct`, `stats.resampled_gap_measure`): D of the screen's surrogate (1.) on its dense grid,
+   near its least D (within `SPREAD_WINDOW`), under each of the same bootstrap resamples of eyes and subjects; the
+   SD of where each resample's minimum lands. It is read only where the surrogate resolves the fitted minimum (its
+   least D within `SURROGATE_AGREE` of the fit's; a well narrower than the nodes is left to the curvature). The
+   search itself (zooms below) uses the curvature's sigma, so the fits and outcomes do not depend on either.
    Zoom: where that sigma is below h / `ZOOM_RATIO` (a parameter the data pin down far more finely than the
    last step, so D rises by more than `ZOOM_RATIO`^2 within one step and a parabola over the step misplaces
    the minimum), the refinement and the quadratic are repeated with h = max(2 sigma, h / 8) for that
@@ -75,6 +82,8 @@ WALK = 2  # refinements repeated at the same h at most, while the best moves (mo
 TOP = 3
 EXTRA_WAVES = 1  # waves of `TOP` more refinements when the refined best ends at an edge (module docstring, 2.)
 EDGE = 0.01
+SPREAD_WINDOW = 30.0  # surrogate points within this of its least D: where a resample's minimum may land
+SURROGATE_AGREE = 2.0  # the surrogate's least D within this of the fit's: its minimum's spread is read
 
 Metrics = dict[str, np.ndarray]
 #: the gap measure D of P simulations at once: conditions shaped (P, E) -> (P,)
@@ -83,6 +92,8 @@ Score = Callable[[Metrics], np.ndarray]
 Terms = Callable[[Metrics], np.ndarray]
 #: the covariance (T, T) of the terms of one simulation over resampled units (`stats.term_covariance`)
 Covariance = Callable[[Metrics], np.ndarray]
+#: D (B, P) of P simulations under each of B resamples of units (`stats.resampled_gap_measure`)
+Resample = Callable[[Metrics], np.ndarray]
 
 
 @dataclass(frozen=True, eq=False)
@@ -179,6 +190,8 @@ class EffectSearch:
         self.surrogate: tuple[np.ndarray, float] | None = None
         self.metrics: list[Metrics] = []  # of every evaluated point, in the order of `points`
         self.factor = np.ones(len(params))  # `correct`: the sandwich's factor on the Delta D = 1 sigma
+        self.spread = np.full(len(params), np.nan)  # `correct`: the surrogate minimum's bootstrap SD
+        self._grid_D: np.ndarray | None = None  # the surrogate's D on its dense grid
         self._pending: np.ndarray | None = self.coarse
         self.screened = False
 
@@ -205,7 +218,8 @@ class EffectSearch:
         self._pending = None
         if self.stage == 0:
             if metrics is not None and score is not None:
-                self.surrogate = surrogate_minimum(self.axes, list(metrics), score, DENSE[len(self.lo)])
+                u, Ds = surrogate_grid(self.axes, list(metrics), score, DENSE[len(self.lo)])
+                self.surrogate, self._grid_D = _grid_minimum(u, Ds), Ds
             self.screened = True  # waits for `continue_search`
             return
         self._advance()
@@ -263,12 +277,20 @@ class EffectSearch:
         self.sigma, self._h = sigma, h
         return None if estimate is None else self._new(estimate[None])
 
-    def correct(self, terms: Terms, covariance: Covariance) -> None:
+    def correct(self, terms: Terms, covariance: Covariance, resample: Resample | None = None) -> None:
         """The sandwich factor of the uncertainty (module docstring, 3.): the terms' gradient at the best point
         from a linear fit over the evaluated points within h of it (2h, 4h while too few), their covariance there
-        by bootstrap."""
+        by bootstrap; and with `resample`, the spread of the surrogate's minimum over the same resamples."""
         if self.stage <= 0 or not np.all(np.isfinite(self.sigma)) or len(self.metrics) != len(self.points):
             return
+        if resample is not None and self._grid_D is not None:
+            u, inter = interpolated(self.axes, self.metrics[:len(self.coarse)], DENSE[len(self.lo)])
+            near = (self._grid_D <= np.nanmin(self._grid_D) + SPREAD_WINDOW).ravel()
+            Ds = resample({k: v[near] for k, v in inter.items()})
+            ok = np.isfinite(Ds).any(axis=1)
+            if ok.sum() > 1:
+                grid = np.array(list(itertools.product(*u)))[near]
+                self.spread = np.std(grid[np.nanargmin(Ds[ok], axis=1)], axis=0, ddof=1)
         i = int(np.argmin(self.Ds))
         found = _window(self.points, self.points[i], self._h, lambda u: np.column_stack([np.ones(len(u)), u]),
                         spare=1)
@@ -277,6 +299,14 @@ class EffectSearch:
         near, u, _, _ = found
         Z = terms(stacked([self.metrics[j] for j in np.flatnonzero(near)]))
         self.factor = sandwich_factor(u, Z, covariance(self.metrics[i]))
+
+    def _spread(self, D: float) -> np.ndarray:
+        """The surrogate minimum's bootstrap SD (`correct`) where the surrogate resolves the fitted minimum (its
+        least D within `SURROGATE_AGREE` of the fit's) and the parabola gave a sigma; NaN elsewhere (module
+        docstring, 3.)."""
+        if self.surrogate is None or abs(self.surrogate[1] - D) > SURROGATE_AGREE:
+            return np.full(len(self.sigma), np.nan)
+        return np.where(np.isnan(self.sigma), np.nan, self.spread)
 
     def result(self) -> EffectFit:
         i = int(np.argmin(self.Ds))
@@ -290,7 +320,7 @@ class EffectSearch:
         alternatives = [{p.name: float(v) for p, v in zip(fitted, c, strict=True)} for c in self.coarse[far]]
         dof = self.n_conditions - len(fitted)
         scale = np.sqrt(max(1.0, D / dof)) if dof > 0 else 1.0
-        sigma = np.full(len(fitted), np.nan) if self.screened else self.sigma * self.factor
+        sigma = np.full(len(fitted), np.nan) if self.screened else np.fmax(self.sigma * self.factor, self._spread(D))
         return EffectFit(self.effect, values, {p.name: float(s * scale) for p, s in zip(fitted, sigma, strict=True)},
                          float(D), float(self.D0), self.n_conditions, self.points, self.Ds, alternatives,
                          self.screened)
@@ -315,27 +345,40 @@ def sandwich_factor(u: np.ndarray, Z: np.ndarray, cov: np.ndarray) -> np.ndarray
     return np.where(np.isfinite(factor) & (factor > 0), factor, 1.0)
 
 
-def surrogate_minimum(axes: list[np.ndarray], metrics: list[Metrics], score: Score,
-                      dense: int) -> tuple[np.ndarray, float]:
-    """The minimum of score(interpolated conditions) on a dense grid over the nodes' range: (point, D); the
-    whole grid is scored in one call."""
+def surrogate_grid(axes: list[np.ndarray], metrics: list[Metrics], score: Score,
+                   dense: int) -> tuple[list[np.ndarray], np.ndarray]:
+    """score(interpolated conditions) on a dense grid over the nodes' range: (the grid's axes, D shaped (dense,) *
+    P); the whole grid is scored in one call."""
+    u, inter = interpolated(axes, metrics, dense)
+    return u, np.asarray(score(inter), float).reshape((dense,) * len(axes))
+
+
+def interpolated(axes: list[np.ndarray], metrics: list[Metrics], dense: int) -> tuple[list[np.ndarray], Metrics]:
+    """Every per-eye condition interpolated from the nodes (`axes`, their `metrics` in the order of
+    itertools.product) to a dense grid: (the grid's axes, conditions (dense ** P, E) in the grid's C order)."""
     values = stacked(metrics)  # (nodes, E)
+    u = [np.linspace(a[0], a[-1], dense) for a in axes]
     if len(axes) == 1:
-        x = axes[0]
-        grid = np.linspace(x[0], x[-1], dense)
         from scipy.interpolate import make_interp_spline
 
-        inter = {k: make_interp_spline(x, _filled(v), k=min(3, len(x) - 1), axis=0)(grid) for k, v in values.items()}
-        points = grid[:, None]
-    else:
-        u = [np.linspace(a[0], a[-1], dense) for a in axes]
-        weights = [_lagrange(a, g) for a, g in zip(axes, u, strict=True)]  # (dense, nodes) each
-        w = np.einsum("ai,bj->abij", *weights).reshape(dense * dense, -1)  # node order of itertools.product
-        inter = {k: w @ _filled(v) for k, v in values.items()}
-        points = np.array(list(itertools.product(*u)))
-    Ds = np.asarray(score(inter), float)
-    j = int(np.nanargmin(Ds))
-    return points[j], float(Ds[j])
+        x = axes[0]
+        return u, {k: make_interp_spline(x, _filled(v), k=min(3, len(x) - 1), axis=0)(u[0])
+                   for k, v in values.items()}
+    weights = [_lagrange(a, g) for a, g in zip(axes, u, strict=True)]  # (dense, nodes) each
+    w = np.einsum("ai,bj->abij", *weights).reshape(dense * dense, -1)  # node order of itertools.product
+    return u, {k: w @ _filled(v) for k, v in values.items()}
+
+
+def surrogate_minimum(axes: list[np.ndarray], metrics: list[Metrics], score: Score,
+                      dense: int) -> tuple[np.ndarray, float]:
+    """The minimum of the surrogate (`surrogate_grid`): (point, D)."""
+    u, Ds = surrogate_grid(axes, metrics, score, dense)
+    return _grid_minimum(u, Ds)
+
+
+def _grid_minimum(u: list[np.ndarray], Ds: np.ndarray) -> tuple[np.ndarray, float]:
+    j = np.unravel_index(int(np.nanargmin(Ds)), Ds.shape)
+    return np.array([a[i] for a, i in zip(u, j, strict=True)]), float(Ds[j])
 
 
 def stacked(metrics: Sequence[Metrics]) -> Metrics:
@@ -412,7 +455,7 @@ def max_evaluations(effect: Effect, refined: bool = True) -> int:
 def search_effects(effects: Sequence[Effect], evaluate: Callable[[list[Applied]], list[Metrics]],
                    score: Score, D0: float, n_conditions: int, top: int = TOP,
                    progress: Callable[[int], None] | None = None,
-                   sandwich: tuple[Terms, Covariance] | None = None) -> list[EffectFit]:
+                   sandwich: tuple[Terms, Covariance, Resample] | None = None) -> list[EffectFit]:
     """Fit every effect (module docstring); `evaluate(applied list)` returns the conditions of each applied
     effect (one batch per stage), `score(conditions)` the D of each (conditions of P simulations, each (P, E), ->
     (P,): a batch's nodes and a surrogate grid are scored in one call); `progress(n)` after each batch;

@@ -197,13 +197,13 @@ def compare(simulated: Mapping[str, np.ndarray], measured: Measured, reference: 
 
 
 def gap_measure(simulated: Mapping[str, np.ndarray], measured: Measured,
-                reference: Callable[[str], str | None]) -> np.ndarray:
+                reference: Callable[[str], str | None], rows: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
     """D of many simulations at once: `simulated` maps each condition to (P, E) per-eye values of P
     simulations; returns (P,) equal to `compare(..., tests=False).D` of each row (NaN where a row has fewer
-    than 2 finite eyes). The search scores its dense surrogate grids with it."""
+    than 2 finite eyes). The search scores its dense surrogate grids with it. `rows` as in `gap_terms`."""
     D = None
     for name in measured.conditions:
-        z_mean, z_spread = _condition_terms(name, simulated, measured, reference)
+        z_mean, z_spread = _condition_terms(name, simulated, measured, reference, (rows or {}).get(name))
         term = z_mean**2 + np.where(np.isnan(z_spread), 0.0, z_spread**2)
         D = term if D is None else D + term
     return np.asarray(D, float)
@@ -224,15 +224,45 @@ def gap_terms(simulated: Mapping[str, np.ndarray], measured: Measured,
 def term_covariance(simulated: Mapping[str, np.ndarray], measured: Measured, reference: Callable[[str], str | None],
                     *, B: int = BOOTSTRAP, seed: int = 0) -> np.ndarray:
     """Covariance (2 C, 2 C) of the terms of `gap_terms` of one simulation (`simulated`: (E,) per condition) over
-    `B` bootstrap resamples of whole units: the simulated eyes (jointly across conditions), and the measured
-    subjects (jointly when the data are paired, so the terms' correlation through shared subjects is kept; each
-    list on its own when they are independent samples). A summary condition with an SD has its mean redrawn from
-    N(mean, sd^2 / n); one without an SD stays fixed. Under "no gap" a term's variance is about 1 and two conditions
-    of the same subjects correlate: what the chi-square reading of D and its Delta D = 1 uncertainties assume away
-    (`search.sandwich_factor`)."""
-    rng = np.random.default_rng(seed)
+    `B` bootstrap resamples of whole units (`_resamples`). Under "no gap" a term's variance is about 1 and two
+    conditions of the same subjects correlate: what the chi-square reading of D and its Delta D = 1 uncertainties
+    assume away (`search.sandwich_factor`)."""
     one = {k: np.asarray(v, float).ravel() for k, v in simulated.items()}
-    E = len(next(iter(one.values())))
+    eyes, redrawn, rows = _resamples(len(next(iter(one.values()))), measured, B, seed)
+    terms = gap_terms({k: v[eyes] for k, v in one.items()}, redrawn, reference, rows)
+    return np.cov(terms, rowvar=False)
+
+
+def resampled_gap_measure(simulated: Mapping[str, np.ndarray], measured: Measured,
+                          reference: Callable[[str], str | None], *, B: int = BOOTSTRAP, seed: int = 0) -> np.ndarray:
+    """D (B, P) of P simulations (`simulated`: (P, E) per condition) under each of `B` bootstrap resamples of whole
+    units (`_resamples`, the same for every simulation): where the minimum of D over the P points lands, resample by
+    resample, is the estimate's bootstrap distribution (`search.EffectSearch.correct`)."""
+    sims = {k: np.asarray(v, float) for k, v in simulated.items()}
+    P, E = next(iter(sims.values())).shape
+    eyes, redrawn, rows = _resamples(E, measured, B, seed)
+    out = np.empty((B, P))
+    chunk = max(1, 200_000 // (P * E))  # resamples at a time: arrays of at most about 200,000 per condition
+    for b in range(0, B, chunk):
+        e = eyes[b:b + chunk]  # (b, E)
+        part = {k: v[:, e].transpose(1, 0, 2).reshape(-1, E) for k, v in sims.items()}  # (b * P, E)
+        sub = replace(redrawn, conditions={
+            name: (replace(c, mean=np.repeat(np.atleast_1d(c.mean)[b:b + chunk], P))
+                   if name in measured.conditions and c is not measured.conditions[name] else c)
+            for name, c in redrawn.conditions.items()})
+        picked = {name: np.repeat(r[b:b + chunk], P, axis=0) for name, r in rows.items()}
+        out[b:b + len(e)] = gap_measure(part, sub, reference, picked).reshape(len(e), P)
+    return out
+
+
+def _resamples(E: int, measured: Measured, B: int, seed: int
+               ) -> tuple[np.ndarray, Measured, dict[str, np.ndarray]]:
+    """`B` bootstrap resamples of whole units: the simulated eyes (B, E), drawn jointly across conditions; the
+    measured subjects, rows (B, S) into each per-subject condition (one draw for every condition when the data are
+    paired, so the terms' correlation through shared subjects is kept; each list on its own when they are
+    independent samples); the measured data with each summary condition with an SD given B means redrawn from
+    N(mean, sd^2 / n) (one without an SD stays fixed)."""
+    rng = np.random.default_rng(seed)
     eyes = rng.integers(0, E, size=(B, E))
     listed = {name: c.values.size for name, c in measured.conditions.items() if c.values is not None}
     if measured.paired and listed:  # one draw of subjects for every condition
@@ -242,9 +272,7 @@ def term_covariance(simulated: Mapping[str, np.ndarray], measured: Measured, ref
         rows = {name: rng.integers(0, size, size=(B, size)) for name, size in listed.items()}
     redrawn = {name: replace(c, mean=c.mean + float(c.sd) / np.sqrt(c.n) * rng.standard_normal(B))
                for name, c in measured.conditions.items() if c.values is None and c.sd is not None}
-    terms = gap_terms({k: v[eyes] for k, v in one.items()}, replace(measured, conditions={
-        **measured.conditions, **redrawn}), reference, rows)
-    return np.cov(terms, rowvar=False)
+    return eyes, replace(measured, conditions={**measured.conditions, **redrawn}), rows
 
 
 def _compared(name: str, simulated: Mapping[str, np.ndarray], measured: Measured,

@@ -70,6 +70,7 @@ from eyehil.analysis.discrepancy.stats import (
     gap_measure,
     gap_terms,
     permutation_gof,
+    resampled_gap_measure,
     term_covariance,
 )
 from eyehil.emulator import effects as registry
@@ -249,8 +250,11 @@ def name_effects(evaluator: Evaluator, measured: Measured, before: Comparison, e
     def covariance(metrics) -> np.ndarray:
         return term_covariance(metrics, measured, evaluator.experiment.reference)
 
+    def resample(metrics) -> np.ndarray:
+        return resampled_gap_measure(metrics, measured, evaluator.experiment.reference)
+
     fits = search_effects(candidates(evaluator, effect_names), evaluate, score, before.D, before.n_terms,
-                          sandwich=(terms, covariance))
+                          sandwich=(terms, covariance, resample))
     return sorted(fits, key=lambda f: (f.screened, f.score))
 
 
