@@ -455,12 +455,12 @@ def max_evaluations(effect: Effect, refined: bool = True) -> int:
 def search_effects(effects: Sequence[Effect], evaluate: Callable[[list[Applied]], list[Metrics]],
                    score: Score, D0: float, n_conditions: int, top: int = TOP,
                    progress: Callable[[int], None] | None = None,
-                   sandwich: tuple[Terms, Covariance, Resample] | None = None) -> list[EffectFit]:
+                   sandwich: tuple[Terms, Covariance, Resample | None] | None = None) -> list[EffectFit]:
     """Fit every effect (module docstring); `evaluate(applied list)` returns the conditions of each applied
     effect (one batch per stage), `score(conditions)` the D of each (conditions of P simulations, each (P, E), ->
     (P,): a batch's nodes and a surrogate grid are scored in one call); `progress(n)` after each batch;
-    `sandwich` (the terms of D and their covariance) corrects the refined fits' uncertainties
-    (`EffectSearch.correct`)."""
+    `sandwich` (the terms of D, their covariance, and D under resampled units or None: the curvature's and
+    the sandwich's sigma alone) corrects the refined fits' uncertainties (`EffectSearch.correct`)."""
     searches = [EffectSearch(e, D0, n_conditions) for e in effects]
     waves = 0  # of refinements after the first (module docstring, 2.)
     while True:
