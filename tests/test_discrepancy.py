@@ -429,7 +429,7 @@ def test_gap_terms_square_to_the_gap_measure_and_their_bootstrap_keeps_what_unit
 def test_resampled_gap_measure_is_the_gap_measure_of_each_resample(paired) -> None:
     """`resampled_gap_measure` gives, resample by resample, D of the resampled units (the eyes, the subjects, a
     summary's redrawn mean: the resamples of `term_covariance`) for many simulations at once."""
-    from eyehil.analysis.discrepancy.stats import _resamples
+    from eyehil.analysis.discrepancy.stats import _resamples, _with_means
 
     rng = np.random.default_rng(6)
     conditions = {"H1": MeasuredCondition(rng.gamma(2.0, 0.2, 5)), "H2": MeasuredCondition(rng.gamma(2.0, 0.25, 5)),
@@ -438,9 +438,9 @@ def test_resampled_gap_measure_is_the_gap_measure_of_each_resample(paired) -> No
     reference = {"H2": "H1", "head:x": "H1"}.get
     sims = {k: rng.lognormal(-1.0, 0.5, (7, 12)) for k in conditions}
     D = resampled_gap_measure(sims, measured, reference, B=9, seed=2)
-    eyes, redrawn, rows = _resamples(12, measured, 9, 2)
+    eyes, means, rows = _resamples(12, measured, 9, 2)
     for p in range(7):
-        terms = gap_terms({k: v[p][eyes] for k, v in sims.items()}, redrawn, reference, rows)
+        terms = gap_terms({k: v[p][eyes] for k, v in sims.items()}, _with_means(measured, means), reference, rows)
         np.testing.assert_allclose(D[:, p], (terms**2).sum(axis=1), rtol=1e-12)
     assert np.ptp(D[:, 0]) > 0  # the resamples differ
 

@@ -228,8 +228,8 @@ def term_covariance(simulated: Mapping[str, np.ndarray], measured: Measured, ref
     conditions of the same subjects correlate: what the chi-square reading of D and its Delta D = 1 uncertainties
     assume away (`search.sandwich_factor`)."""
     one = {k: np.asarray(v, float).ravel() for k, v in simulated.items()}
-    eyes, redrawn, rows = _resamples(len(next(iter(one.values()))), measured, B, seed)
-    terms = gap_terms({k: v[eyes] for k, v in one.items()}, redrawn, reference, rows)
+    eyes, means, rows = _resamples(len(next(iter(one.values()))), measured, B, seed)
+    terms = gap_terms({k: v[eyes] for k, v in one.items()}, _with_means(measured, means), reference, rows)
     return np.cov(terms, rowvar=False)
 
 
@@ -240,28 +240,25 @@ def resampled_gap_measure(simulated: Mapping[str, np.ndarray], measured: Measure
     resample, is the estimate's bootstrap distribution (`search.EffectSearch.correct`)."""
     sims = {k: np.asarray(v, float) for k, v in simulated.items()}
     P, E = next(iter(sims.values())).shape
-    eyes, redrawn, rows = _resamples(E, measured, B, seed)
+    eyes, means, rows = _resamples(E, measured, B, seed)
     out = np.empty((B, P))
     chunk = max(1, 200_000 // (P * E))  # resamples at a time: arrays of at most about 200,000 per condition
     for b in range(0, B, chunk):
         e = eyes[b:b + chunk]  # (b, E)
         part = {k: v[:, e].transpose(1, 0, 2).reshape(-1, E) for k, v in sims.items()}  # (b * P, E)
-        sub = replace(redrawn, conditions={
-            name: (replace(c, mean=np.repeat(np.atleast_1d(c.mean)[b:b + chunk], P))
-                   if name in measured.conditions and c is not measured.conditions[name] else c)
-            for name, c in redrawn.conditions.items()})
+        sub = _with_means(measured, {name: np.repeat(m[b:b + chunk], P) for name, m in means.items()})
         picked = {name: np.repeat(r[b:b + chunk], P, axis=0) for name, r in rows.items()}
         out[b:b + len(e)] = gap_measure(part, sub, reference, picked).reshape(len(e), P)
     return out
 
 
 def _resamples(E: int, measured: Measured, B: int, seed: int
-               ) -> tuple[np.ndarray, Measured, dict[str, np.ndarray]]:
+               ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
     """`B` bootstrap resamples of whole units: the simulated eyes (B, E), drawn jointly across conditions; the
     measured subjects, rows (B, S) into each per-subject condition (one draw for every condition when the data are
     paired, so the terms' correlation through shared subjects is kept; each list on its own when they are
-    independent samples); the measured data with each summary condition with an SD given B means redrawn from
-    N(mean, sd^2 / n) (one without an SD stays fixed)."""
+    independent samples); B means (B,) of each summary condition with an SD, redrawn from N(mean, sd^2 / n) (one
+    without an SD stays fixed)."""
     rng = np.random.default_rng(seed)
     eyes = rng.integers(0, E, size=(B, E))
     listed = {name: c.values.size for name, c in measured.conditions.items() if c.values is not None}
@@ -270,9 +267,15 @@ def _resamples(E: int, measured: Measured, B: int, seed: int
         rows = dict.fromkeys(listed, joint)
     else:  # independent samples
         rows = {name: rng.integers(0, size, size=(B, size)) for name, size in listed.items()}
-    redrawn = {name: replace(c, mean=c.mean + float(c.sd) / np.sqrt(c.n) * rng.standard_normal(B))
-               for name, c in measured.conditions.items() if c.values is None and c.sd is not None}
-    return eyes, replace(measured, conditions={**measured.conditions, **redrawn}), rows
+    means = {name: c.mean + float(c.sd) / np.sqrt(c.n) * rng.standard_normal(B)
+             for name, c in measured.conditions.items() if c.values is None and c.sd is not None}
+    return eyes, means, rows
+
+
+def _with_means(measured: Measured, means: Mapping[str, np.ndarray]) -> Measured:
+    """`measured` with the summary conditions of `means` given those (redrawn) means, an array each."""
+    redrawn = {name: replace(measured.conditions[name], mean=m) for name, m in means.items()}
+    return replace(measured, conditions={**measured.conditions, **redrawn})
 
 
 def _compared(name: str, simulated: Mapping[str, np.ndarray], measured: Measured,
