@@ -31,7 +31,13 @@ from eyehil.analysis.discrepancy.measured import load_recordings
 from eyehil.analysis.discrepancy.metrics import Evaluator, Memo
 from eyehil.analysis.discrepancy.recording import write_recording
 from eyehil.analysis.discrepancy.report import render_markdown
-from eyehil.analysis.discrepancy.search import max_evaluations, sandwich_factor, search_effects, surrogate_minimum
+from eyehil.analysis.discrepancy.search import (
+    grid_minimum,
+    max_evaluations,
+    sandwich_factor,
+    search_effects,
+    surrogate_grid,
+)
 from eyehil.analysis.discrepancy.stats import (
     compare,
     gap_measure,
@@ -508,7 +514,7 @@ def test_surrogate_takes_a_condition_no_eye_could_give(axes) -> None:
     ("Array must not contain infs or nans"). The measured condition still decides the minimum."""
     nodes = np.array(np.meshgrid(*axes, indexing="ij")).reshape(len(axes), -1).T
     metrics = [{"C5": 1.0 + (x[0] - 0.3) ** 2 + np.zeros(4), "M9:C5": np.full(4, np.nan)} for x in nodes]
-    point, least = surrogate_minimum(axes, metrics, lambda m: np.mean(m["C5"], axis=-1), 101)
+    point, least = grid_minimum(*surrogate_grid(axes, metrics, lambda m: np.mean(m["C5"], axis=-1), 101))
     assert point[0] == pytest.approx(0.3, abs=0.02) and least == pytest.approx(1.0, abs=1e-3)
 
 

@@ -219,7 +219,7 @@ class EffectSearch:
         if self.stage == 0:
             if metrics is not None and score is not None:
                 u, Ds = surrogate_grid(self.axes, list(metrics), score, DENSE[len(self.lo)])
-                self.surrogate, self._grid_D = _grid_minimum(u, Ds), Ds
+                self.surrogate, self._grid_D = grid_minimum(u, Ds), Ds
             self.screened = True  # waits for `continue_search`
             return
         self._advance()
@@ -369,14 +369,8 @@ def interpolated(axes: list[np.ndarray], metrics: list[Metrics], dense: int) -> 
     return u, {k: w @ _filled(v) for k, v in values.items()}
 
 
-def surrogate_minimum(axes: list[np.ndarray], metrics: list[Metrics], score: Score,
-                      dense: int) -> tuple[np.ndarray, float]:
-    """The minimum of the surrogate (`surrogate_grid`): (point, D)."""
-    u, Ds = surrogate_grid(axes, metrics, score, dense)
-    return _grid_minimum(u, Ds)
-
-
-def _grid_minimum(u: list[np.ndarray], Ds: np.ndarray) -> tuple[np.ndarray, float]:
+def grid_minimum(u: list[np.ndarray], Ds: np.ndarray) -> tuple[np.ndarray, float]:
+    """The least D of a grid (`surrogate_grid`'s axes `u` and D, NaN ignored): (point, D)."""
     j = np.unravel_index(int(np.nanargmin(Ds)), Ds.shape)
     return np.array([a[i] for a, i in zip(u, j, strict=True)]), float(Ds[j])
 
