@@ -25,8 +25,10 @@ def start_view(url: str, opts: DeviceOptions, args: argparse.Namespace, blink: A
     """
     if args.link == "zmq" or opts.mode != "native":
         raise ValueError("--view needs a native-protocol device (--link pty|tcp|usbip, --mode native)")
-    geometry = args.write_geometry or write_geometry(load_scene(opts.scene),
-                                                     Path(tempfile.mkdtemp(prefix="eyehil-view-")) / "geometry.toml")
     view_args = argparse.Namespace(view_host="127.0.0.1", view_port=args.view_port, view_open=args.view_open,
                                    view_stream="auto", record_video=args.record_video)
-    return close_view, serve(url, view_args, str(geometry), oracle=blink)
+    if args.write_geometry:
+        return close_view, serve(url, view_args, str(args.write_geometry), oracle=blink)
+    with tempfile.TemporaryDirectory(prefix="eyehil-view-") as folder:  # the page reads the file once, at start
+        geometry = write_geometry(load_scene(opts.scene), Path(folder) / "geometry.toml")
+        return close_view, serve(url, view_args, str(geometry), oracle=blink)

@@ -27,6 +27,19 @@ def eyes() -> EyeModel:
     return make_eyes()
 
 
+@pytest.fixture(autouse=True)
+def dask_scratch(tmp_path_factory):
+    """Dask's scratch space (`temporary-directory`) under pytest's temporary root, not a shared
+    /tmp/dask-scratch-space left behind by the suite; nothing when Dask (an optional extra) is not installed."""
+    try:
+        import dask
+    except ImportError:
+        yield
+        return
+    with dask.config.set({"temporary-directory": str(tmp_path_factory.getbasetemp() / "dask")}):
+        yield
+
+
 def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
     """The blind trials' rates of every setting that ran, passed or not: the run's record of what was measured."""
     summarise(terminalreporter, config)

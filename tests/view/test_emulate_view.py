@@ -14,8 +14,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def test_emulate_view_serves_the_page_of_its_device_and_stops_cleanly():
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+def test_emulate_view_serves_the_page_of_its_device_and_stops_cleanly(tmp_path):
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "TMPDIR": str(tmp_path)}
     proc = subprocess.Popen([sys.executable, "-m", "eyehil.cli", "emulate", "--link", "tcp", "--view", "--view-port",
                              "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT)
     try:
@@ -39,3 +39,4 @@ def test_emulate_view_serves_the_page_of_its_device_and_stops_cleanly():
         _, err = proc.communicate(timeout=60)
     assert proc.returncode == 0, err
     assert "Traceback" not in err
+    assert list(tmp_path.iterdir()) == []  # the page's geometry file (and LSL's configuration, if any) are gone

@@ -10,7 +10,9 @@ import io
 import os
 import shutil
 import signal
+import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -153,3 +155,14 @@ def test_the_pipe_codec() -> None:
         wire.read(io.BytesIO(wire.frame({"a": 1})[:-1]))
     with pytest.raises(wire.WireError, match="map"):
         wire.read(io.BytesIO(b"\x01\x00\x00\x00\x05"))
+
+
+def test_the_loopback_configuration_file_is_removed_when_the_process_ends(tmp_path) -> None:
+    env = {k: v for k, v in os.environ.items() if k != "LSLAPICFG"} | {"TMPDIR": str(tmp_path)}
+    code = ("from eyehil.emulator.device.lsl.library import use_loopback_config; import os; "
+            "p = use_loopback_config(); print(p); print(open(p).read() != '' and os.environ['LSLAPICFG'] == p)")
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    path, written = done.stdout.split("\n")[:2]
+    assert written == "True" and Path(path).parent == tmp_path  # it was there while the process ran
+    assert list(tmp_path.iterdir()) == []  # and is gone after

@@ -1,14 +1,16 @@
 """pylsl and liblsl's configuration for the facade.
 
 liblsl reads its configuration once per process from the file named by LSLAPICFG. Unless the user set
-LSLAPICFG, `use_loopback_config` points it at `LOOPBACK_CONFIG` (written once to a temporary file): stream
-discovery answers on 127.0.0.1 only (``ListenAddress``), within this machine (``ResolveScope = machine``,
-multicast TTL 0), IPv4 only. The data and time ports are kept on the loopback by `loopback` (liblsl has no
+LSLAPICFG, `use_loopback_config` points it at `LOOPBACK_CONFIG` (written once to a temporary file, removed at
+exit): stream discovery answers on 127.0.0.1 only (``ListenAddress``), within this machine (``ResolveScope =
+machine``, multicast TTL 0), IPv4 only. The data and time ports are kept on the loopback by `loopback` (liblsl has no
 option for them).
 """
 
 from __future__ import annotations
 
+import atexit
+import contextlib
 import os
 import tempfile
 
@@ -35,7 +37,14 @@ def use_loopback_config() -> str:
             f.write(LOOPBACK_CONFIG)
         os.environ["LSLAPICFG"] = path
         _written.append(path)
+        atexit.register(_remove, path)
     return os.environ["LSLAPICFG"]
+
+
+def _remove(path: str) -> None:
+    """Delete the configuration file at exit (liblsl read it when it loaded)."""
+    with contextlib.suppress(OSError):
+        os.remove(path)
 
 
 def ours(path: str) -> bool:
