@@ -63,6 +63,7 @@ import scipy.stats as sps
 
 from eyehil.analysis.discrepancy.data import Measured, MeasuredCondition
 from eyehil.analysis.discrepancy.metrics import Evaluator, Memo
+from eyehil.analysis.discrepancy.profile import Profile, probes
 from eyehil.analysis.discrepancy.search import TOP, EffectFit, max_evaluations, search_effects
 from eyehil.analysis.discrepancy.stats import (
     Comparison,
@@ -83,6 +84,7 @@ ALPHA_ADD = 0.05  # family-wise level of a round's addition, over its candidates
 RIVAL_SCORE = 2.0  # D + 2k within this of the added effect's: a rival the data cannot tell from it (`Round.rivals`)
 CONTEND = 30.0  # D + 2k within this of the last added effect's in its round: backfitted in its place (`_contend`)
 CONTENDERS = 2  # at most this many contenders backfitted
+PROFILE = True  # later rounds score their candidates with the earlier effects free (`_profile`)
 CHUNK = 12  # points per evaluation call (each a batched calibration)
 
 
@@ -227,12 +229,16 @@ def candidates(evaluator: Evaluator, names: Sequence[str] | None = None) -> list
 
 
 def name_effects(evaluator: Evaluator, measured: Measured, before: Comparison, effect_names=None,
-                 alpha: float = 0.05, progress: Progress | None = None) -> list[EffectFit]:
-    """Step 2: every candidate effect fitted (batched together), ranked by D + 2k (best first)."""
+                 alpha: float = 0.05, progress: Progress | None = None,
+                 profile: Profile | None = None) -> list[EffectFit]:
+    """Step 2: every candidate effect fitted (batched together), ranked by D + 2k (best first); with a `profile`,
+    every point is scored with the earlier rounds' effects free (`eyehil.analysis.discrepancy.profile`)."""
     progress = progress or Silent()
+    free = profile if profile is not None else (lambda metrics: metrics)
+    one = profile.one if profile is not None else (lambda metrics: metrics)
 
     def score(metrics) -> np.ndarray:
-        D = gap_measure(metrics, measured, evaluator.experiment.reference)
+        D = gap_measure(free(metrics), measured, evaluator.experiment.reference)
         if np.isnan(D).any():
             raise ValueError("a simulation has fewer than 2 eyes with a finite value in some condition")
         return D
@@ -245,13 +251,13 @@ def name_effects(evaluator: Evaluator, measured: Measured, before: Comparison, e
         return out
 
     def terms(metrics) -> np.ndarray:
-        return gap_terms(metrics, measured, evaluator.experiment.reference)
+        return gap_terms(free(metrics), measured, evaluator.experiment.reference)
 
     def covariance(metrics) -> np.ndarray:
-        return term_covariance(metrics, measured, evaluator.experiment.reference)
+        return term_covariance(one(metrics), measured, evaluator.experiment.reference)
 
     def resample(metrics) -> np.ndarray:
-        return resampled_gap_measure(metrics, measured, evaluator.experiment.reference)
+        return resampled_gap_measure(free(metrics), measured, evaluator.experiment.reference)
 
     fits = search_effects(candidates(evaluator, effect_names), evaluate, score, before.D, before.n_terms,
                           sandwich=(terms, covariance, resample))
@@ -274,7 +280,8 @@ def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel
         done, added, fits = [], [], []
         names = list(effect_names or registry.names())
         for i in range(rounds):
-            current = _round(search, measured, names, alpha, progress, f"round {i + 1}")
+            profile = _profile(initial, measured, added, progress) if added and PROFILE else None
+            current = _round(search, measured, names, alpha, progress, f"round {i + 1}", profile)
             done.append(current)
             if current.added is None:
                 break
@@ -286,8 +293,10 @@ def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel
         backfitted = len(added) > 1
         if backfitted:
             added, fits, search = _backfit(initial, search, measured, added, fits, alpha, progress)
-            done[-1], added, fits, search = _contend(initial, search, measured, done[-1], added, fits, alpha,
-                                                     progress)
+            for j in reversed(range(len(done))):  # the last round first: its fits are the most biased
+                if done[j].added is not None:
+                    done[j], added, fits, search = _contend(initial, search, measured, done[j], j, added, fits,
+                                                            alpha, progress)
         # the last round's own comparison is the final model's unless that round or the backfit changed the model
         final = find(search, measured, alpha) if backfitted or done[-1].added is not None else done[-1].before
         interactions = None
@@ -349,14 +358,24 @@ def decide(rounds: list[Round], final: Comparison, show_after: Comparison, k_tot
                          f"over {final.n_terms} terms, goodness-of-fit p = {gof:.2g}")
 
 
-def _round(search: Evaluator, measured: Measured, effect_names, alpha, progress, label: str) -> Round:
+def _profile(initial: Evaluator, measured: Measured, added: list[Applied], progress: Progress) -> Profile:
+    """The linear model of the added effects' parameters near their fits (`eyehil.analysis.discrepancy.profile`)."""
+    points, spans, lo, hi = probes(added)
+    progress.stage("the added effects' slopes", len(points))
+    probed = initial.evaluate(points, progress.advance)
+    return Profile.of(probed, spans, lo, hi,
+                      lambda metrics: gap_terms(metrics, measured, initial.experiment.reference))
+
+
+def _round(search: Evaluator, measured: Measured, effect_names, alpha, progress, label: str,
+           profile: Profile | None = None) -> Round:
     """Steps 1-3 once."""
     before = find(search, measured, alpha)
     if not before.significant:
         return Round(before, [], None, "no significant gap: nothing to add")
     chosen = candidates(search, effect_names)
     progress.stage(f"{label}: fitting {len(chosen)} effects", _evaluations(chosen))
-    fits = name_effects(search, measured, before, effect_names, alpha, progress) \
+    fits = name_effects(search, measured, before, effect_names, alpha, progress, profile) \
         if effect_names is None or len(effect_names) else []
     return choose(before, fits)
 
@@ -393,15 +412,17 @@ def _backfit(initial: Evaluator, search: Evaluator, measured: Measured, added: l
     return added, fits, initial.with_base(added) if changed else search
 
 
-def _contend(initial: Evaluator, search: Evaluator, measured: Measured, last: Round, added: list[Applied],
+def _contend(initial: Evaluator, search: Evaluator, measured: Measured, last: Round, j: int, added: list[Applied],
              fits: list[EffectFit], alpha: float, progress: Progress
              ) -> tuple[Round, list[Applied], list[EffectFit], Evaluator]:
-    """The last round's contenders (module docstring, step 3), each put in place of the last added effect and
-    the model backfitted; returns the round with the scores of the backfitted models (`Round.backfitted`) and
-    its added effect the best of them, and the model of that one."""
+    """A round's contenders (module docstring, step 3), each put in place of the effect the round added (the
+    `j`-th) and the model backfitted; returns the round with the scores of the backfitted models
+    (`Round.backfitted`) and its added effect the best of them, and the model of that one."""
     assert last.added is not None
+    present = {a.effect.name for a in added}
     close = [f for f in last.fits if f is not last.added and not f.screened and f.passes(last.level)
-             and f.score - last.added.score <= CONTEND][:CONTENDERS]  # passes: lowers D, not at an edge
+             and (f.score - last.added.score) / last.added.scale**2 <= CONTEND
+             and f.effect.name not in present][:CONTENDERS]  # passes: lowers D, not at an edge
     if not close:
         return last, added, fits, search
     reference = initial.experiment.reference
@@ -410,17 +431,18 @@ def _contend(initial: Evaluator, search: Evaluator, measured: Measured, last: Ro
         D = compare(model.base_metrics, measured, reference, alpha, tests=False).D
         return D + 2 * sum(len(a.effect.fitted) for a in chosen)
 
-    models = {last.added.effect.name: (score(search, added), added, fits, search)}
+    own = added[j].effect.name
+    models = {own: (score(search, added), added, fits, search)}
     for f in close:
-        trial_added, trial_fits = [*added[:-1], f.applied], [*fits[:-1], f]
+        trial_added, trial_fits = [*added[:j], f.applied, *added[j + 1:]], [*fits[:j], f, *fits[j + 1:]]
         model = initial.with_base(trial_added)
         trial_added, trial_fits, model = _backfit(initial, model, measured, trial_added, trial_fits, alpha, progress)
         models[f.effect.name] = (score(model, trial_added), trial_added, trial_fits, model)
     name = min(models, key=lambda n: models[n][0])
     _, added, fits, search = models[name]
-    verdict = last.verdict if name == last.added.effect.name else (
-        f"{last.verdict}; backfitted, {name} fits better in its place: {fits[-1].applied.label()}")
-    return (replace(last, added=fits[-1], verdict=verdict, backfitted={n: m[0] for n, m in models.items()}),
+    verdict = last.verdict if name == own else (
+        f"{last.verdict}; backfitted, {name} fits better in its place: {fits[j].applied.label()}")
+    return (replace(last, added=fits[j], verdict=verdict, backfitted={n: m[0] for n, m in models.items()}),
             added, fits, search)
 
 
