@@ -9,7 +9,9 @@ add them to the model, and show the gap shrink, or say that no known effect expl
    experiment and is not in the model yet is fitted to minimise D (`eyehil.analysis.discrepancy.search`: a
    screen of all, refinement of the best few) and ranked by D + 2k (k fitted parameters), in every round
    (not only those that lowered D in round 1: that hides a pair's smaller effect, whose drop of D in round 1
-   is scaled down by the larger one's misfit).
+   is scaled down by the larger one's misfit). From round 2 on, every candidate's point is scored with the
+   earlier rounds' effects free near their fits (`_profile`, `eyehil.analysis.discrepancy.profile`: D minimised
+   over a linear shift of their parameters), for their fits are biased by the gap still open when they were made.
 3. add: the top-ranked effect with no fitted parameter at the edge of its plausible range joins the model at
    its fitted values if it lowers D by more than the chi-square(k) point at level 1 - `ALPHA_ADD` / n (after the
    misfit scale factor; `add_level`: Bonferroni over the n candidates fitted in the round, for the best of n is
@@ -17,9 +19,10 @@ add them to the model, and show the gap shrink, or say that no known effect expl
    reported and never added, and the next candidate is considered (the search refined it for that case). If
    nothing passes, nothing is added and the round says why.
    Steps 1-3 repeat for up to `rounds` rounds (a second effect is fitted with the first in the model).
-   With two or more effects added, each is refitted with the others in the model (`_backfit`), and so are the
-   last round's close contenders (`_contend`): up to `CONTENDERS` refined fits that lower D and score within
-   `CONTEND` of the added one, each backfitted in place of the last added effect. The first effect was fitted
+   With two or more effects added, each is refitted with the others in the model (`_backfit`), and so are every
+   round's close contenders, the last round's first (`_contend`): up to `CONTENDERS` refined fits that lower D and
+   score within `CONTEND` of the added one (after the added fit's misfit scale s^2), each backfitted in place of
+   the effect its round added. The first effect was fitted
    while the second's gap was still open, so the round ranks the second's candidates against a biased first
    (a pupil decentration behind a corneal one, 93 against 76, that tie at 64 and 63 once the lens distortion
    fitted before them is refitted); the backfitted model of lowest D + 2k is kept, and the others within
@@ -53,7 +56,7 @@ workflow blind (tests/test_discrepancy*.py, `eyehil discrepancy --hidden`).
 from __future__ import annotations
 
 import itertools
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
@@ -82,9 +85,8 @@ from eyehil.parallel import worker_pool
 ALPHA_GOF = 0.01
 ALPHA_ADD = 0.05  # family-wise level of a round's addition, over its candidates (`add_level`)
 RIVAL_SCORE = 2.0  # D + 2k within this of the added effect's: a rival the data cannot tell from it (`Round.rivals`)
-CONTEND = 30.0  # D + 2k within this of the last added effect's in its round: backfitted in its place (`_contend`)
+CONTEND = 30.0  # D + 2k within this (/ s^2) of the effect its round added: backfitted in its place (`_contend`)
 CONTENDERS = 2  # at most this many contenders backfitted
-PROFILE = True  # later rounds score their candidates with the earlier effects free (`_profile`)
 CHUNK = 12  # points per evaluation call (each a batched calibration)
 
 
@@ -280,8 +282,9 @@ def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel
         done, added, fits = [], [], []
         names = list(effect_names or registry.names())
         for i in range(rounds):
-            profile = _profile(initial, measured, added, progress) if added and PROFILE else None
-            current = _round(search, measured, names, alpha, progress, f"round {i + 1}", profile)
+            free = (lambda added=tuple(added): _profile(initial, measured, list(added), progress)) \
+                if added else None
+            current = _round(search, measured, names, alpha, progress, f"round {i + 1}", free)
             done.append(current)
             if current.added is None:
                 break
@@ -368,11 +371,13 @@ def _profile(initial: Evaluator, measured: Measured, added: list[Applied], progr
 
 
 def _round(search: Evaluator, measured: Measured, effect_names, alpha, progress, label: str,
-           profile: Profile | None = None) -> Round:
-    """Steps 1-3 once."""
+           free: Callable[[], Profile] | None = None) -> Round:
+    """Steps 1-3 once; `free` makes the profile over the earlier rounds' effects, if any (`_profile`), when the
+    round has a gap to fit."""
     before = find(search, measured, alpha)
     if not before.significant:
         return Round(before, [], None, "no significant gap: nothing to add")
+    profile = free() if free is not None else None
     chosen = candidates(search, effect_names)
     progress.stage(f"{label}: fitting {len(chosen)} effects", _evaluations(chosen))
     fits = name_effects(search, measured, before, effect_names, alpha, progress, profile) \
