@@ -52,8 +52,10 @@ SHORT: dict[tuple[str, str], str] = {
         "named as fixation error (per-fixation scatter alike) and a decentred pupil as its twin, the decentred "
         "cornea; the corneal index and the pupil ellipse open no gap in gaze errors"),
     ("guestrin2006-tables", "pairs_in_order"): (
-        "2 of 10, 2 of the 8 visible: 5 end 'none explains' after mimics of head roll and screen tilt (a pupil "
-        "shift, a decentred cornea); 3 name one effect of two, two of them beside the invisible corneal index"),
+        "3 of 10, 3 of the 8 visible: a pupil shift, the head roll's mimic in gaze errors, is named beside a "
+        "screen tilt, and beside an astigmatism leaves a spread gap ('none explains'); an asphericity with a "
+        "tangential distortion and a camera bump with a screen tilt end 'none explains'; 3 name one effect of two, "
+        "two of them beside the invisible corneal index"),
     ("guestrin2006-tables", "outside_none_explains"): (
         "2 of 4: feature noise is explained by fixation error, a pupil change by a pupil shift (without the pupil's "
         "size, its change is its centre's shift)"),
