@@ -6,6 +6,7 @@ show the gap shrink (docs/discrepancy.md).
 - `recording`: eyehil recordings as measured subjects (features per target and head position);
 - `measured`: measured data from a built-in set, a file or a folder of recordings (`--measured`);
 - `guestrin`: the Guestrin 2006 experiment batched over eyes; `stats`: per-condition tests and the gap measure;
-- `search`: fitting an effect's parameters; `report`: the output folder; `cli`: `eyehil discrepancy`;
+- `search`: fitting an effect's parameters; `profile`: a later round's candidates scored with the earlier
+  effects' parameters free; `report`: the output folder; `cli`: `eyehil discrepancy`;
 - `trials`: blind trials at random strengths and their rates (``python -m eyehil.analysis.discrepancy.trials``).
 """

@@ -87,7 +87,7 @@ class Profile:
         delta = np.zeros((P, k))
         z = self._terms(metrics, delta)
         D = np.sum(z**2, axis=1)
-        eps = EPS * (self.hi - self.lo) / (2 * SHIFT)  # EPS of the plausible range (the bounds span 2 SHIFT of it)
+        eps = EPS * (self.hi - self.lo) / (2 * SHIFT)  # EPS of the range, or half that where a bound cuts the shift
         for _ in range(ITERATIONS):
             Jz = np.stack([(self._terms(metrics, delta + eps[j] * np.eye(k)[j]) - z) / eps[j] for j in range(k)],
                           axis=2)  # (P, T, k)
