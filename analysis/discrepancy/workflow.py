@@ -59,6 +59,7 @@ import itertools
 from collections.abc import Callable, Sequence
 from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Any, Protocol
 
 import numpy as np
@@ -282,8 +283,7 @@ def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel
         done, added, fits = [], [], []
         names = list(effect_names or registry.names())
         for i in range(rounds):
-            free = (lambda added=tuple(added): _profile(initial, measured, list(added), progress)) \
-                if added else None
+            free = partial(_profile, initial, measured, list(added), progress) if added else None
             current = _round(search, measured, names, alpha, progress, f"round {i + 1}", free)
             done.append(current)
             if current.added is None:
