@@ -67,7 +67,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import stats as sps
@@ -157,6 +157,34 @@ class EffectFit:
         """P(chi-square(n - k) >= D): the goodness of fit with this effect (1 with no dof left)."""
         dof = self.n_conditions - self.k
         return float(sps.chi2.sf(self.D, dof)) if dof > 0 else 1.0
+
+    def basins(self) -> list[EffectFit]:
+        """The screen's other basins: nodes of its grid (`NODES`) whose D is below every neighbour's (the 3^P - 1
+        around) and below D0, more than 1.5 node steps from the fit, best first, each as a fit at its node (no
+        sigma). A fit made beside another effect's
+        open gap can land in the wrong one (a screen tilt's sign; `workflow._restart`)."""
+        params = self.effect.fitted
+        n, P = NODES[len(params)], len(params)
+        if len(self.Ds) < n**P:
+            return []
+        D = self.Ds[:n**P].reshape((n,) * P)
+        padded = np.pad(D, 1, constant_values=np.inf)
+        lowest = np.ones(D.shape, bool)
+        for shift in itertools.product((-1, 0, 1), repeat=P):
+            if any(shift):
+                window = tuple(slice(1 + s, 1 + s + n) for s in shift)
+                lowest &= padded[window] > D
+        lo, hi = np.array([p.low for p in params]), np.array([p.high for p in params])
+        step = (hi - lo) / (n - 1)
+        at = np.array([self.values[p.name] for p in params])
+        out = []
+        for index in sorted(zip(*np.nonzero(lowest & (D < self.D0)), strict=True), key=lambda i: D[i]):
+            node = lo + np.array(index) * step
+            if np.any(np.abs(node - at) > 1.5 * step):
+                values = {**self.values, **{p.name: float(v) for p, v in zip(params, node, strict=True)}}
+                out.append(replace(self, values=values, D=float(D[index]), sigma=dict.fromkeys(self.sigma, np.nan),
+                                   alternatives=[]))
+        return out
 
     def lowers(self, level: float = 0.95) -> bool:
         """(D0 - D) / scale^2 above the `level` point of chi-square(k)."""

@@ -19,7 +19,12 @@ add them to the model, and show the gap shrink, or say that no known effect expl
    reported and never added, and the next candidate is considered (the search refined it for that case). If
    nothing passes, nothing is added and the round says why.
    Steps 1-3 repeat for up to `rounds` rounds (a second effect is fitted with the first in the model).
-   With two or more effects added, each is refitted with the others in the model (`_backfit`), and so are every
+   A later round whose best fit ends at an edge, or where nothing passes though a gap is left, is fitted again
+   from other starts of the earlier effects: their screens' other basins, or their rounds' close contenders in
+   their place (`_restart`: the earlier fits' bias can hold the round's effect at an edge or make it useless).
+   With two or more effects added, each is refitted with the others in the model (`_backfit`), then all are
+   moved together along their linear model while D falls (`_polish`: one effect at a time crawls along a valley
+   where two trade off), and refitted again there (`_settle`); and so are every
    round's close contenders, the last round's first (`_contend`): up to `CONTENDERS` refined fits that lower D and
    score within `CONTEND` of the added one (after the added fit's misfit scale s^2), each backfitted in place of
    the effect its round added. The first effect was fitted
@@ -88,6 +93,8 @@ ALPHA_ADD = 0.05  # family-wise level of a round's addition, over its candidates
 RIVAL_SCORE = 2.0  # D + 2k within this of the added effect's: a rival the data cannot tell from it (`Round.rivals`)
 CONTEND = 30.0  # D + 2k within this (/ s^2) of the effect its round added: backfitted in its place (`_contend`)
 CONTENDERS = 2  # at most this many contenders backfitted
+POLISH, POLISH_GAIN = 4, 0.5  # joint moves of the added effects at most, and the least gain of D (`_polish`)
+BASINS = 2  # other basins of each earlier effect an edge fit of a later round is backfitted from (`_restart`)
 CHUNK = 12  # points per evaluation call (each a batched calibration)
 
 
@@ -285,6 +292,11 @@ def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel
         for i in range(rounds):
             free = partial(_profile, initial, measured, list(added), progress) if added else None
             current = _round(search, measured, names, alpha, progress, f"round {i + 1}", free)
+            moved = _restart(initial, measured, done, current, added, fits, alpha, progress) if added else None
+            if moved is not None:
+                done, current, added, fits, search = moved
+                done.append(current)
+                continue
             done.append(current)
             if current.added is None:
                 break
@@ -295,7 +307,7 @@ def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel
             progress.advance(1)
         backfitted = len(added) > 1
         if backfitted:
-            added, fits, search = _backfit(initial, search, measured, added, fits, alpha, progress)
+            added, fits, search = _settle(initial, search, measured, added, fits, alpha, progress)
             for j in reversed(range(len(done))):  # the last round first: its fits are the most biased
                 if done[j].added is not None:
                     done[j], added, fits, search = _contend(initial, search, measured, done[j], j, added, fits,
@@ -395,6 +407,132 @@ def choose(before: Comparison, fits: list[EffectFit]) -> Round:
     return Round(before, fits, best, _verdict(best, free, fits, level), level)
 
 
+def _restart(initial: Evaluator, measured: Measured, done: list[Round], current: Round, added: list[Applied],
+             fits: list[EffectFit], alpha: float, progress: Progress
+             ) -> tuple[list[Round], Round, list[Applied], list[EffectFit], Evaluator] | None:
+    """A later round fitted beside earlier effects fitted while its gap was still open; two ways their bias can
+    stop it, each met by fitting the round's best candidate again from other starts of the earlier effects:
+
+    - its best fit ends at an edge of its range, ranked above the round's addition (if any): the earlier effects
+      may hold it there. A screen tilt fitted in the wrong basin (its sign) beside a hidden camera bump pushes
+      the bump's fit to its pitch's end, and the profile lets the tilt move by a quarter of its range only.
+      Starts: the earlier effects as fitted, with the edge fit; and each of their screens' other basins
+      (`EffectFit.basins`, up to `BASINS` each);
+    - nothing passes though a gap is left and its best fit not at an edge lowers D (at 95 %, before the
+      round's Bonferroni): an earlier round may have added a mimic of its effect, which the new one cannot
+      complement (a glint occlusion for a corneal asphericity beside a tangential distortion). Starts: each
+      earlier round's close contenders (`_close`) in place of the effect that round added.
+
+    From each start the candidate is fitted (where it is not the edge fit itself) and the model settled
+    (`_settle`); the settled model of least D with no parameter at an edge is kept if the candidate passes the
+    round's level against the model of the earlier effects as they were and the model's D + 2k is below the
+    round's (its addition's, if any). Returns the rounds before (a contender replaced in its round) and this
+    round, the effects, their fits and the model's evaluator; or None (all as they were)."""
+    ranked = itertools.takewhile(lambda f: f is not current.added, current.fits)
+    edged = next((f for f in ranked if f.at_edge and not f.screened and f.lowers(current.level)), None)
+    present = {a.effect.name for a in added}
+    if edged is not None:
+        chosen = edged
+        starts = [(None, list(fits), edged)] + [(None, [*fits[:j], basin, *fits[j + 1:]], None)
+                                                for j, f in enumerate(fits) for basin in f.basins()[:BASINS]]
+    elif current.added is None and current.before.significant:
+        chosen = next((f for f in current.fits if not f.screened and not f.at_edge), None)
+        if chosen is None or not chosen.lowers():
+            return None
+        starts = [(j, [*fits[:j], c, *fits[j + 1:]], None) for j, r in enumerate(done) for c in _close(r, present)]
+    else:
+        return None
+    reference = initial.experiment.reference
+    best = None
+    for j, start, new in starts:
+        if new is None:  # the candidate refitted beside this start
+            model = initial.with_base([f.applied for f in start])
+            before = compare(model.base_metrics, measured, reference, alpha, tests=False)
+            [new] = name_effects(model, measured, before, [chosen.effect.name], alpha, progress)
+        trial_fits = [*start, new]
+        trial = [f.applied for f in trial_fits]
+        trial, trial_fits, model = _settle(initial, initial.with_base(trial), measured, trial, trial_fits, alpha,
+                                           progress)
+        if any(f.at_edge for f in trial_fits):
+            continue
+        D = compare(model.base_metrics, measured, reference, alpha, tests=False).D
+        if best is None or best[0] > D:
+            best = D, j, trial, trial_fits, model
+    if best is None:
+        return None
+    D, j, trial, trial_fits, model = best
+    fit = replace(trial_fits[-1], D=D, D0=current.before.D)  # the drop from the earlier effects as they were
+    k_before = sum(f.k for f in fits)
+    if current.added is not None:
+        k_before, D_before = k_before + current.added.k, current.added.D
+    else:
+        D_before = current.before.D
+    if not fit.passes(current.level) or D + 2 * sum(f.k for f in trial_fits) >= D_before + 2 * k_before:
+        return None
+    rounds = list(done)
+    if edged is not None:
+        how = (f"{edged.applied.label()} ends at the edge of its plausible range ({', '.join(edged.at_edge)}); "
+               "backfitted with the earlier effects it leaves the edge")
+    else:
+        how = (f"{chosen.applied.label()} does not pass beside {fits[j].applied.label()}; with "
+               f"{trial_fits[j].applied.label()} in its place (round {j + 1}'s contender) it does")
+        rounds[j] = replace(done[j], added=trial_fits[j], verdict=(
+            f"{done[j].verdict}; {trial_fits[j].effect.name} fits better in its place beside round "
+            f"{len(done) + 1}'s {fit.effect.name}: {trial_fits[j].applied.label()}"))
+    verdict = f"{how}: added {fit.applied.label()}: D {fit.D0:.1f} -> {fit.D:.1f}"
+    return rounds, replace(current, added=fit, verdict=verdict), trial, [*trial_fits[:-1], fit], model
+
+
+def _close(done: Round, present: set[str]) -> list[EffectFit]:
+    """A round's close contenders: up to `CONTENDERS` other refined fits that pass at its level and score within
+    `CONTEND` of its added effect (after its misfit scale s^2), of effects not in the model."""
+    assert done.added is not None
+    return [f for f in done.fits if f is not done.added and not f.screened and f.passes(done.level)
+            and (f.score - done.added.score) / done.added.scale**2 <= CONTEND
+            and f.effect.name not in present][:CONTENDERS]
+
+
+def _settle(initial: Evaluator, search: Evaluator, measured: Measured, added: list[Applied],
+            fits: list[EffectFit], alpha: float, progress: Progress
+            ) -> tuple[list[Applied], list[EffectFit], Evaluator]:
+    """`_backfit`, then `_polish`; if the polish moved the effects, `_backfit` again there (each fit's uncertainty
+    is its own refit's), unless that leaves more parameters at an edge of their range. Same arguments and returns
+    as `_backfit`."""
+    added, fits, search = _backfit(initial, search, measured, added, fits, alpha, progress)
+    moved, D = _polish(initial, measured, added, search, alpha, progress)
+    if moved is added:
+        return added, fits, search
+    polished = [replace(f, values=dict(a.values), D=D) for f, a in zip(fits, moved, strict=True)]
+    after = _backfit(initial, initial.with_base(moved), measured, moved, polished, alpha, progress)
+    edges = [sum(len(f.at_edge) for f in fs) for fs in (fits, after[1])]
+    return after if edges[1] <= edges[0] else (added, fits, search)
+
+
+def _polish(initial: Evaluator, measured: Measured, added: list[Applied], model: Evaluator, alpha: float,
+            progress: Progress) -> tuple[list[Applied], float]:
+    """All added effects' parameters moved together, up to `POLISH` times, by the least-D shift of their linear
+    model (`_profile`: two simulations per parameter, each shift within a quarter of the range), while D falls:
+    a backfit refits one effect at a time, which crawls along a valley where two effects trade off (a screen tilt
+    and a camera bump). Returns the effects (the list `added` itself if none moved) and their D."""
+    reference = initial.experiment.reference
+    D = compare(model.base_metrics, measured, reference, alpha, tests=False).D
+    for _ in range(POLISH):
+        profile = _profile(initial, measured, added, progress)
+        delta, moved, at = profile.best_shift(model.base_metrics)[0], [], 0
+        for a in added:
+            k = len(a.effect.fitted)
+            values = {p.name: float(a.values[p.name] + d) for p, d in zip(a.effect.fitted, delta[at:at + k],
+                                                                           strict=True)}
+            moved.append(Applied(a.effect, {**a.values, **values}))
+            at += k
+        trial = initial.with_base(moved)
+        D_trial = compare(trial.base_metrics, measured, reference, alpha, tests=False).D
+        if not D_trial < D - POLISH_GAIN:
+            break
+        added, model, D = moved, trial, D_trial
+    return added, D
+
+
 def _backfit(initial: Evaluator, search: Evaluator, measured: Measured, added: list[Applied],
              fits: list[EffectFit], alpha: float, progress: Progress
              ) -> tuple[list[Applied], list[EffectFit], Evaluator]:
@@ -424,10 +562,7 @@ def _contend(initial: Evaluator, search: Evaluator, measured: Measured, last: Ro
     `j`-th) and the model backfitted; returns the round with the scores of the backfitted models
     (`Round.backfitted`) and its added effect the best of them, and the model of that one."""
     assert last.added is not None
-    present = {a.effect.name for a in added}
-    close = [f for f in last.fits if f is not last.added and not f.screened and f.passes(last.level)
-             and (f.score - last.added.score) / last.added.scale**2 <= CONTEND
-             and f.effect.name not in present][:CONTENDERS]  # passes: lowers D, not at an edge
+    close = _close(last, {a.effect.name for a in added})
     if not close:
         return last, added, fits, search
     reference = initial.experiment.reference
@@ -441,7 +576,7 @@ def _contend(initial: Evaluator, search: Evaluator, measured: Measured, last: Ro
     for f in close:
         trial_added, trial_fits = [*added[:j], f.applied, *added[j + 1:]], [*fits[:j], f, *fits[j + 1:]]
         model = initial.with_base(trial_added)
-        trial_added, trial_fits, model = _backfit(initial, model, measured, trial_added, trial_fits, alpha, progress)
+        trial_added, trial_fits, model = _settle(initial, model, measured, trial_added, trial_fits, alpha, progress)
         models[f.effect.name] = (score(model, trial_added), trial_added, trial_fits, model)
     name = min(models, key=lambda n: models[n][0])
     _, added, fits, search = models[name]
