@@ -439,10 +439,13 @@ def _restart(initial: Evaluator, measured: Measured, done: list[Round], current:
         chosen = next((f for f in current.fits if not f.screened and not f.at_edge), None)
         if chosen is None or not chosen.lowers():
             return None
+        present.add(chosen.effect.name)
         starts = [(j, [*fits[:j], c, *fits[j + 1:]], None) for j, r in enumerate(done) for c in _close(r, present)]
     else:
         return None
     reference = initial.experiment.reference
+    progress.stage(f"round {len(done) + 1}: {chosen.effect.name} from {len(starts)} starts of the earlier effects",
+                   sum(max_evaluations(chosen.effect) for _, _, new in starts if new is None))
     best = None
     for j, start, new in starts:
         if new is None:  # the candidate refitted beside this start

@@ -1,0 +1,88 @@
+"""A later round fitted again from other starts of the earlier effects (`workflow._restart`), and the backfit's joint
+move (`workflow._polish`): the two blind pair trials of Guestrin 2006's gaze-error tables that ended "none explains"
+before them (6 and 1, docs/blind-trials.md, 24th session), with the trials' eyes and hidden values and the catalogue
+cut to the effects that matter, for speed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from eyehil.analysis.discrepancy import workflow
+from eyehil.analysis.discrepancy.search import NODES, EffectFit
+from eyehil.analysis.discrepancy.trials import catalogue, model_eyes
+from eyehil.analysis.discrepancy.workflow import hidden_measured, run_discrepancy
+from eyehil.emulator import effects
+from eyehil.emulator.effects import Applied
+from eyehil.emulator.eye.population import sample
+
+
+def _trial(index: int, hidden: list[Applied]):
+    """The measured data of blind pair trial `index` (`trials.trial`: seed 0, 20 hidden eyes, tables) and the
+    trials' 20 Rozema model eyes."""
+    eyes = sample(20, np.random.default_rng(7 + index)).eyes
+    return hidden_measured(hidden, eyes=eyes, experiment="guestrin2006", seed=3 + index), model_eyes("rozema", 20, 0)
+
+
+def test_basins_are_the_screens_other_local_minima() -> None:
+    """A 5 x 5 screen of a screen tilt with two bowls: the fit's own and another; nodes on a slope or near the fit
+    are not basins, nor a local minimum above D0."""
+    tilt = effects.get("screen_tilt")
+    n = NODES[2]
+    axes = [np.linspace(p.low, p.high, n) for p in tilt.fitted]
+    grid = np.array([(a, b) for a in axes[0] for b in axes[1]])
+    own, other = grid[7], grid[17]  # nodes (1, 2) and (3, 2)
+
+    def bowl(at, depth):
+        return depth + np.sum(((grid - at) / 2.0) ** 2, axis=1)
+
+    Ds = np.minimum(bowl(own, 50.0), bowl(other, 60.0))
+    values = dict(zip([p.name for p in tilt.fitted], own + 0.3, strict=True))
+    fit = EffectFit(tilt, values, {p.name: 0.1 for p in tilt.fitted}, 49.0, 200.0, 14, grid, Ds)
+    [basin] = fit.basins()
+    assert [basin.values[p.name] for p in tilt.fitted] == pytest.approx(list(other))
+    assert round(basin.D, 9) == 60.0 and all(np.isnan(s) for s in basin.sigma.values())
+    assert EffectFit(tilt, values, {}, 49.0, 55.0, 14, grid, Ds).basins() == []  # above D0: not a basin
+    assert EffectFit(tilt, values, {}, 49.0, 200.0, 14, grid[:5], Ds[:5]).basins() == []  # no whole screen
+
+
+def test_an_edge_fit_restarts_from_the_earlier_effects_other_basin() -> None:
+    """Pair 6: round 1 fits the screen tilt in the wrong basin (its tilt's sign), so round 2's camera bump ends at
+    its pitch's edge; from the tilt's other basin both are found, near their hidden values."""
+    hidden = [Applied.of(effects.get("camera_bump"), pitch_deg=0.3197, yaw_deg=-0.2778),
+              Applied.of(effects.get("screen_tilt"), tilt_deg=-8.329, yaw_deg=-8.661)]
+    measured, model = _trial(6, hidden)
+    names = ["screen_tilt", "camera_bump", "glint_occlusion", "lens_distortion"]
+    result = run_discrepancy(measured, eyes=model, search_eyes=model[:16], effect_names=names, rounds=2, workers=2)
+    first, second = result.rounds
+    assert first.fits[0].effect.name == "screen_tilt" and first.fits[0].values["tilt_deg"] > 0  # the wrong basin
+    assert second.fits[0].effect.name == "camera_bump" and second.fits[0].at_edge
+    assert "leaves the edge: added camera_bump" in second.verdict
+    assert result.outcome == "explained", result.reason
+    assert {a.effect.name for a in result.named} == {"screen_tilt", "camera_bump"}
+    found = {a.effect.name: a.values for a in result.added}
+    assert found["screen_tilt"]["tilt_deg"] == pytest.approx(-8.329, abs=1.5)
+    assert found["screen_tilt"]["yaw_deg"] == pytest.approx(-8.661, abs=1.5)
+    assert found["camera_bump"]["pitch_deg"] == pytest.approx(0.3197, abs=0.05)
+
+
+def test_a_round_that_passes_nothing_restarts_from_an_earlier_rounds_contender(monkeypatch) -> None:
+    """Pair 1: round 1 adds a glint occlusion, a mimic of the hidden corneal asphericity, and round 2's tangential
+    distortion does not pass beside it; with the asphericity, round 1's contender, in its place it does. The
+    round's level is the whole catalogue's (`add_level` of its 20 candidates, as in the trial), for with 4 the
+    tangential distortion passes beside the mimic and the backfit of contenders finds the asphericity anyway."""
+    n = len(catalogue("guestrin2006"))
+    monkeypatch.setattr(workflow, "add_level", lambda _: 1.0 - workflow.ALPHA_ADD / n)
+    hidden = [Applied.of(effects.get("corneal_asphericity"), delta_q=0.3813),
+              Applied.of(effects.get("tangential_distortion"), p1=-0.03322, p2=-0.02478)]
+    measured, model = _trial(1, hidden)
+    names = ["glint_occlusion", "corneal_asphericity", "tangential_distortion", "lens_distortion"]
+    result = run_discrepancy(measured, eyes=model, search_eyes=model[:16], effect_names=names, rounds=2, workers=2)
+    first, second = result.rounds
+    assert first.fits[0].effect.name == "glint_occlusion"  # round 1's own pick, the mimic
+    assert first.added.effect.name == "corneal_asphericity" and "fits better in its place" in first.verdict
+    assert "in its place (round 1's contender) it does" in second.verdict
+    assert result.outcome == "explained", result.reason
+    assert {a.effect.name for a in result.named} == {"corneal_asphericity", "tangential_distortion"}
+    found = {a.effect.name: a.values for a in result.added}
+    assert found["corneal_asphericity"]["delta_q"] == pytest.approx(0.3813, abs=0.05)
