@@ -58,3 +58,15 @@ def test_the_profile_finds_the_shift_that_closes_a_linear_gap_and_keeps_its_boun
     assert np.all(np.abs(narrow.best_shift(point)) <= 0.1 + 1e-12)  # the bounds hold
     one = profile.one({c: base[c] for c in J})
     assert set(one) == set(J) and one["a"].shape == (E,)
+
+
+def test_the_profiles_sigma_is_the_curvature_of_its_linear_terms() -> None:
+    """D = |z|^2 with z linear in the shift: Delta D = 1 at sqrt(diag((Jz' Jz)^-1)), Jz the terms' slope."""
+    J, base = _model(1)
+    target = {"a": 0.2, "b": -0.1}
+    h = 0.05
+    probed = [{c: base[c] + s * h * np.eye(2)[j] @ J[c] for c in J} for j in range(2) for s in (1, -1)]
+    profile = Profile.of(probed, np.full(2, 2 * h), np.full(2, -1.0), np.full(2, 1.0), _terms(target))
+    Jz = np.array([[J[c][j].mean() / 0.1 for j in range(2)] for c in sorted(target)])  # (T, k)
+    expected = np.sqrt(np.diag(np.linalg.inv(Jz.T @ Jz)))
+    np.testing.assert_allclose(profile.sigma(base), expected, rtol=1e-6)

@@ -46,6 +46,38 @@ def test_basins_are_the_screens_other_local_minima() -> None:
     assert EffectFit(tilt, values, {}, 49.0, 200.0, 14, grid[:5], Ds[:5]).basins() == []  # no whole screen
 
 
+def test_a_fit_is_off_where_the_parameters_that_can_switch_it_off_are_neutral() -> None:
+    def fit(name: str, **values: float) -> EffectFit:
+        e = effects.get(name)
+        return EffectFit(e, e.values(values), {}, 10.0, 20.0, 14, np.zeros((1, len(e.fitted))), np.array([10.0]))
+
+    assert fit("feature_noise", sigma_px=0.0).off and not fit("feature_noise", sigma_px=0.05).off
+    assert fit("glint_occlusion", bias=0.0, radius_px=7.0).off  # the radius cannot switch it off; the bias does
+    assert not fit("glint_occlusion", bias=0.5, radius_px=7.0).off
+    assert not fit("screen_tilt", tilt_deg=0.0, yaw_deg=5.0).off and fit("screen_tilt", tilt_deg=0.0, yaw_deg=0.0).off
+
+
+def test_an_added_effect_refitted_to_do_nothing_leaves_the_model_and_its_round_says_so() -> None:
+    from eyehil.analysis.discrepancy.workflow import Round, _drop_off
+
+    def fit(name: str, **values: float) -> EffectFit:
+        e = effects.get(name)
+        return EffectFit(e, e.values(values), {}, 5.0, 140.0, 12, np.zeros((1, len(e.fitted))), np.array([5.0]))
+
+    class Initial:
+        def with_base(self, added):
+            return [a.effect.name for a in added]
+
+    noise, occlusion = fit("feature_noise", sigma_px=0.0), fit("glint_occlusion", bias=0.77, radius_px=9.1)
+    rounds = [Round(None, [noise], noise, "added feature_noise"),  # type: ignore[arg-type]
+              Round(None, [occlusion], occlusion, "added glint_occlusion")]  # type: ignore[arg-type]
+    added, fits, model, rounds = _drop_off(Initial(), None, [noise.applied, occlusion.applied],  # type: ignore[arg-type]
+                                           [noise, occlusion], rounds)
+    assert [a.effect.name for a in added] == model == ["glint_occlusion"] and fits == [occlusion]
+    assert rounds[0].verdict.endswith("(feature_noise at its neutral value): dropped")
+    assert rounds[1].verdict == "added glint_occlusion"
+
+
 def test_an_edge_fit_restarts_from_the_earlier_effects_other_basin() -> None:
     """Pair 6: round 1 fits the screen tilt in the wrong basin (its tilt's sign), so round 2's camera bump ends at
     its pitch's edge; from the tilt's other basin both are found, near their hidden values."""

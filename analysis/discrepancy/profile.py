@@ -105,6 +105,22 @@ class Profile:
                 np.where(better, D_trial, D)
         return delta
 
+    def sigma(self, metrics: Metrics) -> np.ndarray:
+        """1-sigma of the parameters at the profile's own point, from one simulation's conditions (E,) there: D
+        read as a chi-square, Delta D = 1, sqrt(diag((Jz' Jz)^-1)) with Jz the slope of D's terms; NaN where Jz' Jz
+        is singular."""
+        metrics = {c: np.atleast_2d(np.asarray(v, float)) for c, v in metrics.items()}
+        k = len(self.lo)
+        z = self._terms(metrics, np.zeros((1, k)))
+        eps = EPS * (self.hi - self.lo) / (2 * SHIFT)
+        Jz = np.stack([(self._terms(metrics, eps[j] * np.eye(k)[j][None]) - z)[0] / eps[j] for j in range(k)],
+                      axis=1)  # (T, k)
+        try:
+            cov = np.linalg.inv(Jz.T @ Jz)
+        except np.linalg.LinAlgError:
+            return np.full(k, np.nan)
+        return np.sqrt(np.clip(np.diag(cov), 0.0, None))
+
     def __call__(self, metrics: Metrics) -> Metrics:
         """Conditions (P, E) at each simulation's best shift."""
         metrics = {c: np.atleast_2d(np.asarray(v, float)) for c, v in metrics.items()}

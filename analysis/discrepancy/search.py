@@ -158,6 +158,13 @@ class EffectFit:
         dof = self.n_conditions - self.k
         return float(sps.chi2.sf(self.D, dof)) if dof > 0 else 1.0
 
+    @property
+    def off(self) -> bool:
+        """Whether the fit does nothing: every fitted parameter whose neutral value lies in its range (those that
+        can switch the effect off) is within `EDGE` of it."""
+        can = [p for p in self.effect.fitted if p.switches_off]
+        return bool(can) and all(abs(self.values[p.name] - p.neutral) <= EDGE * (p.high - p.low) for p in can)
+
     def basins(self) -> list[EffectFit]:
         """The screen's other basins: nodes of its grid (`NODES`) whose D is below every neighbour's (the 3^P - 1
         around) and below D0, more than 1.5 node steps from the fit, best first, each as a fit at its node (no

@@ -153,7 +153,8 @@ class Round:
             best = self.backfitted[self.added.effect.name]
             return [n for n, v in self.backfitted.items() if n != self.added.effect.name and v - best <= RIVAL_SCORE]
         return [f.effect.name for f in self.fits
-                if f is not self.added and f.lowers(self.level) and f.score - self.added.score <= RIVAL_SCORE]
+                if f.effect.name != self.added.effect.name and f.lowers(self.level)
+                and f.score - self.added.score <= RIVAL_SCORE]
 
 
 @dataclass(frozen=True)
@@ -211,7 +212,8 @@ class DiscrepancyResult:
                                                   "at_edge": p.name in f.at_edge} for p in a.effect.fitted}
         return {"outcome": self.outcome, "reason": self.reason,
                 "named_effects": [a.effect.name for a in self.named],
-                "rivals": {r.added.effect.name: r.rivals for r in self.rounds if r.added is not None},
+                "rivals": {r.added.effect.name: r.rivals for r in self.rounds
+                           if r.added is not None and r.added.effect.name in by_name},
                 "twins": {a.effect.name: list(a.effect.twins) for a in self.added if a.effect.twins},
                 "partial_effects": [] if self.outcome == "explained" else [a.effect.name for a in self.added],
                 "parameters": parameters,
@@ -312,6 +314,7 @@ def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel
                 if done[j].added is not None:
                     done[j], added, fits, search = _contend(initial, search, measured, done[j], j, added, fits,
                                                             alpha, progress)
+            added, fits, search, done = _drop_off(initial, search, added, fits, done)
         # the last round's own comparison is the final model's unless that round or the backfit changed the model
         final = find(search, measured, alpha) if backfitted or done[-1].added is not None else done[-1].before
         interactions = None
@@ -495,6 +498,21 @@ def _close(done: Round, present: set[str]) -> list[EffectFit]:
             and f.effect.name not in present][:CONTENDERS]
 
 
+def _drop_off(initial: Evaluator, search: Evaluator, added: list[Applied], fits: list[EffectFit], done: list[Round]
+              ) -> tuple[list[Applied], list[EffectFit], Evaluator, list[Round]]:
+    """The added effects that, refitted beside the others, do nothing (`EffectFit.off`: a feature noise polished
+    to 0 px beside the glint occlusion it stood in for) leave the model, and their rounds say so."""
+    off = {f.effect.name for f in fits if f.off}
+    if not off:
+        return added, fits, search, done
+    rounds = [replace(r, verdict=f"{r.verdict}; refitted beside the later effects it does nothing "
+                                 f"({r.added.effect.name} at its neutral value): dropped")
+              if r.added is not None and r.added.effect.name in off else r for r in done]
+    kept = [(a, f) for a, f in zip(added, fits, strict=True) if f.effect.name not in off]
+    added, fits = [a for a, _ in kept], [f for _, f in kept]
+    return added, fits, initial.with_base(added), rounds
+
+
 def _settle(initial: Evaluator, search: Evaluator, measured: Measured, added: list[Applied],
             fits: list[EffectFit], alpha: float, progress: Progress
             ) -> tuple[list[Applied], list[EffectFit], Evaluator]:
@@ -503,12 +521,31 @@ def _settle(initial: Evaluator, search: Evaluator, measured: Measured, added: li
     as `_backfit`."""
     added, fits, search = _backfit(initial, search, measured, added, fits, alpha, progress)
     moved, D = _polish(initial, measured, added, search, alpha, progress)
-    if moved is added:
-        return added, fits, search
-    polished = [replace(f, values=dict(a.values), D=D) for f, a in zip(fits, moved, strict=True)]
-    after = _backfit(initial, initial.with_base(moved), measured, moved, polished, alpha, progress)
-    edges = [sum(len(f.at_edge) for f in fs) for fs in (fits, after[1])]
-    return after if edges[1] <= edges[0] else (added, fits, search)
+    if moved is not added:
+        polished = [replace(f, values=dict(a.values), D=D) for f, a in zip(fits, moved, strict=True)]
+        after = _backfit(initial, initial.with_base(moved), measured, moved, polished, alpha, progress)
+        if sum(len(f.at_edge) for f in after[1]) <= sum(len(f.at_edge) for f in fits):
+            added, fits, search = after
+    return added, _fill_sigma(initial, measured, added, fits, search, alpha, progress), search
+
+
+def _fill_sigma(initial: Evaluator, measured: Measured, added: list[Applied], fits: list[EffectFit],
+                model: Evaluator, alpha: float, progress: Progress) -> list[EffectFit]:
+    """The fits with an unknown uncertainty (NaN: a point a polish or a basin's node gave, where the search's own
+    refit ends elsewhere, at an edge: a glint occlusion's bias) get the linear model's at the model's point
+    (`Profile.sigma`, times the model's misfit scale s)."""
+    if not any(np.isnan(v) for f in fits for v in f.sigma.values()):
+        return fits
+    sigma = _profile(initial, measured, added, progress).sigma(model.base_metrics)
+    D = compare(model.base_metrics, measured, initial.experiment.reference, alpha, tests=False).D
+    dof = fits[0].n_conditions - sum(f.k for f in fits)
+    scale = float(np.sqrt(max(1.0, D / dof))) if dof > 0 else 1.0
+    out, at = [], 0
+    for f in fits:
+        own = dict(zip((p.name for p in f.effect.fitted), scale * sigma[at:at + f.k], strict=True))
+        out.append(replace(f, sigma={n: (float(own[n]) if np.isnan(v) else v) for n, v in f.sigma.items()}))
+        at += f.k
+    return out
 
 
 def _polish(initial: Evaluator, measured: Measured, added: list[Applied], model: Evaluator, alpha: float,
@@ -555,6 +592,8 @@ def _backfit(initial: Evaluator, search: Evaluator, measured: Measured, added: l
         [fit] = name_effects(others, measured, before, [applied.effect.name], alpha, progress)
         if current > fit.D and not fit.at_edge:
             added[j], fits[j], current, changed = fit.applied, fit, fit.D, True
+        elif any(np.isnan(v) for v in fits[j].sigma.values()):  # a basin's node or a polished point: no sigma of
+            fits[j] = replace(fits[j], sigma=fit.sigma)  # its own, the refit's at the others as they are
     return added, fits, initial.with_base(added) if changed else search
 
 
