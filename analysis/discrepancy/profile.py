@@ -89,8 +89,7 @@ class Profile:
         D = np.sum(z**2, axis=1)
         eps = EPS * (self.hi - self.lo) / (2 * SHIFT)  # EPS of the range, or half that where a bound cuts the shift
         for _ in range(ITERATIONS):
-            Jz = np.stack([(self._terms(metrics, delta + eps[j] * np.eye(k)[j]) - z) / eps[j] for j in range(k)],
-                          axis=2)  # (P, T, k)
+            Jz = self._slope(metrics, delta, z, eps)
             A = np.einsum("ptj,ptl->pjl", Jz, Jz) + 1e-12 * np.eye(k)
             g = np.einsum("ptj,pt->pj", Jz, z)
             try:
@@ -112,9 +111,7 @@ class Profile:
         metrics = {c: np.atleast_2d(np.asarray(v, float)) for c, v in metrics.items()}
         k = len(self.lo)
         z = self._terms(metrics, np.zeros((1, k)))
-        eps = EPS * (self.hi - self.lo) / (2 * SHIFT)
-        Jz = np.stack([(self._terms(metrics, eps[j] * np.eye(k)[j][None]) - z)[0] / eps[j] for j in range(k)],
-                      axis=1)  # (T, k)
+        Jz = self._slope(metrics, np.zeros((1, k)), z, EPS * (self.hi - self.lo) / (2 * SHIFT))[0]  # (T, k)
         try:
             cov = np.linalg.inv(Jz.T @ Jz)
         except np.linalg.LinAlgError:
@@ -129,6 +126,12 @@ class Profile:
     def one(self, metrics: Metrics) -> Metrics:
         """One simulation's conditions (E,) at its best shift."""
         return {c: v[0] for c, v in self(metrics).items()}
+
+    def _slope(self, metrics: Metrics, delta: np.ndarray, z: np.ndarray, eps: np.ndarray) -> np.ndarray:
+        """d terms / d shift (P, T, k) at shifts `delta` (P, k), where the terms are `z`, by forward differences
+        `eps` (k,)."""
+        k = len(eps)
+        return np.stack([(self._terms(metrics, delta + eps[j] * np.eye(k)[j]) - z) / eps[j] for j in range(k)], axis=2)
 
     def _terms(self, metrics: Metrics, delta: np.ndarray) -> np.ndarray:
         return np.nan_to_num(self.terms(self.shift(metrics, delta)), nan=0.0)
