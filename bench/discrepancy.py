@@ -8,13 +8,13 @@ from __future__ import annotations
 import resource
 import time
 
+from eyehil.analysis.discrepancy.cli import SEARCH_EYES
 from eyehil.analysis.discrepancy.data import guestrin2006_real
 from eyehil.analysis.discrepancy.workflow import run_discrepancy
 from eyehil.emulator.eye.published import published_eyes
 from eyehil.parallel import default_workers
 
 TARGET_SECONDS = 60.0
-SEARCH_EYES = 20
 
 
 def _cpu() -> float:

@@ -164,8 +164,24 @@ def test_measured_data_round_trip_and_refusals(tmp_path) -> None:
     data["conditions"]["H1"] = [0.3]
     with pytest.raises(ValueError, match="at least 2"):
         Measured.from_dict(data)
-    with pytest.raises(ValueError, match="mean"):
+    with pytest.raises(ValueError, match="condition 'C5': a summary condition needs 'mean'"):
         Measured.from_dict({**data, "conditions": {"C5": {"sd": 1}}})
+    with pytest.raises(ValueError, match="missing field\\(s\\) 'conditions'"):
+        Measured.from_dict({"experiment": "guestrin2006"})
+    with pytest.raises(ValueError, match="not a JSON object"):
+        Measured.from_dict([1, 2])  # type: ignore[arg-type]
+
+
+def test_cli_refuses_what_it_cannot_run(tmp_path, capsys) -> None:
+    """Each with exit code 2 and a message naming the problem, before any simulation of the search."""
+    out = str(tmp_path / "d")
+    cases = {("--search-eyes", "500"): "--search-eyes 500 exceeds the 100 model eyes",
+             ("--eyes", "sample:2"): "--eyes gives 2 model eyes",
+             ("--hidden", "pupil_change=99", "--hidden-eyes", "4"): "only 0 of 4 eyes give features"}
+    for args, message in cases.items():
+        assert main(["discrepancy", *args, "--quiet", "--out", out]) == 2
+        assert message in capsys.readouterr().err
+    assert not (tmp_path / "d").exists()  # nothing half-written
 
 
 def test_search_recovers_a_known_quadratic_minimum_and_its_curvature() -> None:

@@ -75,6 +75,18 @@ SHORT: dict[tuple[str, str], str] = {
         "errors), a decentred pupil removed with its twin and the corneal index open no significant gap ('no gap')"),
 }
 
+#: setting -> rate -> hits the CI run of the 24th session's code measured (docs/blind-trials.md), for the rates whose
+#: trial count is fixed. A strict xfail in `SHORT` catches a rate that reaches its target, not a count that falls
+#: short further; `test_no_count_falls_below_its_record` does. `SLACK` trials below the record are let pass: another
+#: machine's floating point may tip a trial that sits at a decision's boundary.
+RECORD: dict[str, dict[str, int]] = {
+    "guestrin2006-recordings": {"singles_named": 20, "pairs_in_order": 7, "outside_none_explains": 4},
+    "blignaut2014-recordings": {"singles_named": 9, "pairs_in_order": 2, "outside_none_explains": 2},
+    "guestrin2006-tables": {"singles_named": 16, "pairs_in_order": 4, "outside_none_explains": 2},
+    "blignaut2014-tables": {"singles_named": 6, "pairs_in_order": 0, "outside_none_explains": 1},
+}
+SLACK = 1
+
 
 @pytest.fixture(scope="module", params=list(SETTINGS))
 def setting(request) -> str:
@@ -149,3 +161,9 @@ def test_hidden_parameters_lie_within_their_reported_uncertainty(request, settin
     _expect(request, setting, "covered")
     hits, n = counts["covered"]
     assert met(counts)["covered"], f"{hits} of {n} hidden parameters within the fit's 95 % interval"
+
+
+def test_no_count_falls_below_its_record(setting, counts) -> None:
+    fallen = {rate: f"{counts[rate][0]} of {counts[rate][1]}, recorded {hits}"
+              for rate, hits in RECORD[setting].items() if counts[rate][0] < hits - SLACK}
+    assert not fallen, f"fewer hits than recorded (less {SLACK} of slack): {fallen}"

@@ -15,6 +15,8 @@ import argparse
 import time
 from pathlib import Path
 
+SEARCH_EYES = 20  # the default number of search eyes (the first of the model eyes)
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("discrepancy", help="find, name and add the effect missing from the simulation",
@@ -29,7 +31,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "folder of recordings (default: the scene their headers name, else guestrin2006)")
     p.add_argument("--out", default="discrepancy", help="output folder (default ./discrepancy)")
     p.add_argument("--eyes", default="published", help="model eyes: published (default) | sample:N | N")
-    p.add_argument("--search-eyes", type=int, default=20, help="eyes used in the search (first N; default 20)")
+    p.add_argument("--search-eyes", type=int, default=None,
+                   help=f"eyes used in the search (first N of --eyes; default {SEARCH_EYES}, or all if fewer)")
     p.add_argument("--hidden-eyes", type=int, default=30, help="eyes of --hidden data (default 30)")
     p.add_argument("--hidden-seed", type=int, default=7, help="seed of the --hidden eyes and noise (default 7)")
     p.add_argument("--seed", type=int, default=0, help="seed of the model eyes' draw and noise (default 0)")
@@ -58,12 +61,23 @@ def _measured(args: argparse.Namespace):
 
 
 def _check(args: argparse.Namespace) -> None:
-    if args.search_eyes < 3 or args.hidden_eyes < 3:
+    if (args.search_eyes is not None and args.search_eyes < 3) or args.hidden_eyes < 3:
         raise ValueError("--search-eyes and --hidden-eyes must be >= 3")
     if args.rounds < 1 or not 0 < args.alpha < 1:
         raise ValueError("--rounds must be >= 1 and --alpha in (0, 1)")
     if args.workers is not None and args.workers < 1:
         raise ValueError("--workers must be >= 1")
+
+
+def _search_eyes(asked: int | None, available: int) -> int:
+    """The number of search eyes: `asked` (an error beyond the model eyes), else `SEARCH_EYES` or all of them."""
+    if available < 3:
+        raise ValueError(f"--eyes gives {available} model eyes: the workflow needs >= 3")
+    if asked is None:
+        return min(SEARCH_EYES, available)
+    if asked > available:
+        raise ValueError(f"--search-eyes {asked} exceeds the {available} model eyes of --eyes")
+    return asked
 
 
 class BarProgress:
@@ -110,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
     measured = _measured(args)
     eyes, about = eyes_from_spec(args.eyes, args.seed)
     progress.advance(1)
-    result = run_discrepancy(measured, eyes=eyes, search_eyes=eyes[: min(args.search_eyes, len(eyes))],
+    result = run_discrepancy(measured, eyes=eyes, search_eyes=eyes[:_search_eyes(args.search_eyes, len(eyes))],
                              effect_names=names, rounds=args.rounds, alpha=args.alpha, seed=args.seed,
                              workers=args.workers or default_workers(), progress=progress)
     progress.stage("writing the report and figure", 1)

@@ -85,12 +85,22 @@ class Measured:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], origin: str = "measured data") -> Measured:
+        if not isinstance(data, dict):
+            raise ValueError(f"{origin}: not a JSON object with 'experiment' and 'conditions'")
         try:
             if data.get("format", FORMAT) != FORMAT:
                 raise ValueError(f"format {data.get('format')!r} is not {FORMAT}")
             if data.get("unit", "deg") != "deg":
                 raise ValueError("unit must be 'deg'")
-            conditions = {str(k): MeasuredCondition.of(v) for k, v in dict(data["conditions"]).items()}
+            missing = [k for k in ("experiment", "conditions") if k not in data]
+            if missing:
+                raise ValueError(f"missing field(s) {', '.join(map(repr, missing))}")
+            conditions = {}
+            for k, v in dict(data["conditions"]).items():
+                try:
+                    conditions[str(k)] = MeasuredCondition.of(v)
+                except (TypeError, ValueError) as exc:
+                    raise ValueError(f"condition {k!r}: {exc}") from None
             subjects = tuple(str(s) for s in data["subjects"]) if data.get("subjects") else None
             known = {"format", "experiment", "source", "unit", "subjects", "conditions"}
             measured = cls(str(data["experiment"]), conditions, subjects, str(data.get("source", "")),

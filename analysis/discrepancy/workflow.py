@@ -652,8 +652,11 @@ def hidden_measured(hidden: Sequence[Applied], *, eyes: EyeModel, experiment: st
     names = tuple(conditions or evaluator.experiment.diagnostic_conditions(evaluator.host))
     values = np.array([evaluator.base_metrics[c] for c in names])
     keep = np.all(np.isfinite(values), axis=0)
+    labels = [a.label() for a in hidden] or ["none"]
+    if keep.sum() < 2:
+        raise ValueError(f"with {', '.join(labels)} only {keep.sum()} of {keep.size} eyes give features in every "
+                         "condition (the workflow needs 2): a value far outside the effect's plausible range?")
     subjects = tuple(f"eye{i + 1}" for i in np.flatnonzero(keep))
     data = {c: MeasuredCondition.of(v[keep]) for c, v in zip(names, values, strict=True)}
-    labels = [a.label() for a in hidden] or ["none"]
     return Measured(experiment, data, subjects, f"simulated: {len(subjects)} eyes, hidden {', '.join(labels)}",
                     {"hidden": labels})
