@@ -21,6 +21,7 @@ Feature noise is read mainly from the error level, which differs between eye sam
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -559,9 +560,24 @@ def test_workflow_finds_names_and_fits_a_hidden_effect(hidden_eyes, name, values
 def test_negative_control_finds_no_gap_and_adds_nothing(hidden_eyes) -> None:
     measured = hidden_measured([], eyes=hidden_eyes, seed=5)
     result = run_discrepancy(measured, eyes=published_eyes()[:SEARCH_EYES], effect_names=CANDIDATES, rounds=2)
-    assert not result.rounds[0].before.significant
+    assert not result.rounds[0].before.significant and result.rounds[0].diffuse_p >= 0.05  # nor D as a whole
     assert result.added == [] and result.rounds[0].fits == [] and result.outcome == "no gap"
     assert result.after.D == result.before.D
+
+
+def test_a_gap_in_d_alone_is_a_gap() -> None:
+    """No condition significant but D beyond chance (`Round.diffuse_p` below alpha): a gap, so a round that adds
+    nothing there ends "none explains", not "no gap"."""
+    from types import SimpleNamespace
+
+    from eyehil.analysis.discrepancy.workflow import Round, decide
+
+    quiet = SimpleNamespace(significant=[], alpha=0.05, D=30.0)
+    diffuse = Round(quiet, [], None, "nothing passes", diffuse_p=0.01)  # type: ignore[arg-type]
+    assert diffuse.gap and not Round(quiet, [], None, "", diffuse_p=0.2).gap  # type: ignore[arg-type]
+    assert not Round(quiet, [], None, "").gap  # type: ignore[arg-type]
+    assert decide([diffuse], quiet, quiet, 0)[0] == "none explains"  # type: ignore[arg-type]
+    assert decide([replace(diffuse, diffuse_p=0.2)], quiet, quiet, 0)[0] == "no gap"  # type: ignore[arg-type]
 
 
 def test_a_memo_returns_the_same_conditions_and_evaluates_only_unseen_points() -> None:

@@ -1,7 +1,8 @@
 """A later round fitted again from other starts of the earlier effects (`workflow._restart`), and the backfit's joint
 move (`workflow._polish`): the two blind pair trials of Guestrin 2006's gaze-error tables that ended "none explains"
-before them (6 and 1, docs/blind-trials.md, 24th session), with the trials' eyes and hidden values and the catalogue
-cut to the effects that matter, for speed."""
+before them (6 and 1, docs/blind-trials.md, 24th session); and a later round that searches a gap no single condition
+shows (`Round.diffuse_p`, pair 2, 25th session). Each with the trials' eyes and hidden values and the catalogue cut
+to the effects that matter, for speed."""
 
 from __future__ import annotations
 
@@ -118,3 +119,24 @@ def test_a_round_that_passes_nothing_restarts_from_an_earlier_rounds_contender(m
     assert {a.effect.name for a in result.named} == {"corneal_asphericity", "tangential_distortion"}
     found = {a.effect.name: a.values for a in result.added}
     assert found["corneal_asphericity"]["delta_q"] == pytest.approx(0.3813, abs=0.05)
+
+
+def test_a_gap_spread_over_every_condition_opens_a_round() -> None:
+    """Pair 2: round 1's camera bump takes up most of the hidden corneal asphericity's gap; what is left raises D
+    beyond chance (goodness-of-fit p 0.04) but leaves no condition significant. Round 2 searches it and names the
+    asphericity near its hidden value; on the model with both, D is back within chance and the round stops."""
+    hidden = [Applied.of(effects.get("camera_bump"), pitch_deg=0.2068, yaw_deg=-0.3618),
+              Applied.of(effects.get("corneal_asphericity"), delta_q=0.3207)]
+    measured, model = _trial(2, hidden)
+    names = ["camera_bump", "corneal_asphericity", "glint_occlusion", "lens_distortion"]
+    result = run_discrepancy(measured, eyes=model, search_eyes=model[:16], effect_names=names, rounds=3, workers=2)
+    first, second, third = result.rounds
+    assert first.before.significant and first.diffuse_p is None and first.added.effect.name == "camera_bump"
+    assert not second.before.significant and second.diffuse_p < 0.05 and second.gap
+    assert "no condition is significant, but D" in second.verdict
+    assert second.added.effect.name == "corneal_asphericity"
+    assert not third.gap and third.diffuse_p >= 0.05 and third.added is None
+    assert result.outcome == "explained", result.reason
+    assert [a.effect.name for a in result.named] == ["camera_bump", "corneal_asphericity"]
+    found = {a.effect.name: a.values for a in result.added}
+    assert found["corneal_asphericity"]["delta_q"] == pytest.approx(0.3207, abs=0.06)

@@ -83,6 +83,9 @@ def _gaps_table(c: Comparison) -> list[str]:
 def _round(i: int, r: Round) -> list[str]:
     lines = [f"### Round {i}", "", f"Find (D = {r.before.D:.2f} over {len(r.before.gaps)} conditions):", "",
              *_gaps_table(r.before), ""]
+    if r.diffuse_p is not None:
+        lines += [f"No condition is significant; D as a whole: goodness-of-fit p = {r.diffuse_p:.2g} "
+                  f"({'a gap' if r.gap else 'no gap'} at alpha {r.before.alpha:g}).", ""]
     if r.fits:
         lines += [f"Name (every candidate effect screened, the best refined; ranked by D + 2k; passes: lowers D past "
                   f"the chi-square(k) point at {100 * r.level:.2f} %, Bonferroni over {len(r.fits)} candidates, "

@@ -3,8 +3,12 @@ add them to the model, and show the gap shrink, or say that no known effect expl
 
 1. find (`find`): simulate the experiment of the measured data on the search eyes with the current model
    and test every measured condition's mean and spread (`eyehil.analysis.discrepancy.stats`: permutation tests,
-   Holm adjusted; gap measure D = sum of squared normal scores of the mean and spread terms). No
-   significant gap: stop.
+   Holm adjusted; gap measure D = sum of squared normal scores of the mean and spread terms). Where no condition
+   is significant, D itself is tested (`Round.diffuse_p`: the goodness of fit of the current model, the permutation
+   test of `eyehil.analysis.discrepancy.stats.permutation_gof` where every condition has per-subject values, else
+   chi-square(n_terms - k) for the k parameters fitted so far) at the same alpha: an effect spread thinly over
+   every condition (a corneal asphericity beside a camera bump that took up most of its gap) leaves no condition
+   significant but D beyond chance. No significant gap either way: stop.
 2. name (`name_effects`): every effect of the catalogue (`eyehil.emulator.effects`) that can act in this
    experiment and is not in the model yet is fitted to minimise D (`eyehil.analysis.discrepancy.search`: a
    screen of all, refinement of the best few) and ranked by D + 2k (k fitted parameters), in every round
@@ -36,7 +40,7 @@ add them to the model, and show the gap shrink, or say that no known effect expl
 
 The **outcome** (`DiscrepancyResult.outcome`) is decided by a stated criterion:
 
-- "no gap": round 1 found no significant gap; nothing is added.
+- "no gap": round 1 found no significant gap (no condition, nor D as a whole); nothing is added.
 - "explained": effects were added, and with them (a) no significant gap is left on the search eyes nor
   on the show eyes, and (b) the model fits: goodness-of-fit p >= `ALPHA_GOF` on the search eyes (the
   permutation test of D of `eyehil.analysis.discrepancy.stats.permutation_gof` where every condition has
@@ -140,6 +144,12 @@ class Round:
     verdict: str
     level: float = 0.95  # the addition's chi-square level (`add_level`)
     backfitted: dict[str, float] | None = None  # D + 2k of the whole model backfitted with each (`_contend`)
+    diffuse_p: float | None = None  # where no condition is significant: the goodness-of-fit p of D (step 1)
+
+    @property
+    def gap(self) -> bool:
+        """Whether step 1 found a gap: a significant condition, or D beyond chance (`diffuse_p` below alpha)."""
+        return bool(self.before.significant) or (self.diffuse_p is not None and self.diffuse_p < self.before.alpha)
 
     @property
     def rivals(self) -> list[str]:
@@ -293,7 +303,8 @@ def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel
         names = list(effect_names or registry.names())
         for i in range(rounds):
             free = partial(_profile, initial, measured, list(added), progress) if added else None
-            current = _round(search, measured, names, alpha, progress, f"round {i + 1}", free)
+            current = _round(search, measured, names, alpha, progress, f"round {i + 1}", free,
+                             sum(len(a.effect.fitted) for a in added))
             moved = _restart(initial, measured, done, current, added, fits, alpha, progress) if added else None
             if moved is not None:
                 done, current, added, fits, search = moved
@@ -356,7 +367,7 @@ def decide(rounds: list[Round], final: Comparison, show_after: Comparison, k_tot
     """The outcome and its reason (module docstring); `gof` the goodness-of-fit p of the final model
     (default the chi-square reading of D)."""
     first = rounds[0]
-    if not first.before.significant and first.added is None:
+    if not first.gap and first.added is None:
         return "no gap", "no significant gap between the model and the data: nothing added"
     if not any(r.added for r in rounds):
         return "none explains", f"none of the known effects explains the gap: {first.verdict}"
@@ -386,18 +397,28 @@ def _profile(initial: Evaluator, measured: Measured, added: list[Applied], progr
 
 
 def _round(search: Evaluator, measured: Measured, effect_names, alpha, progress, label: str,
-           free: Callable[[], Profile] | None = None) -> Round:
+           free: Callable[[], Profile] | None = None, k: int = 0) -> Round:
     """Steps 1-3 once; `free` makes the profile over the earlier rounds' effects, if any (`_profile`), when the
-    round has a gap to fit."""
+    round has a gap to fit; `k` the parameters fitted so far (the chi-square reading of `Round.diffuse_p`)."""
     before = find(search, measured, alpha)
+    diffuse = None
     if not before.significant:
-        return Round(before, [], None, "no significant gap: nothing to add")
+        diffuse = permutation_gof(search.base_metrics, measured, search.experiment.reference, before.D)
+        diffuse = before.gof_p(k) if diffuse is None else diffuse
+        if not diffuse < alpha:
+            return Round(before, [], None, f"no significant gap (nor D as a whole: goodness-of-fit p = {diffuse:.2g})"
+                                           ": nothing to add", diffuse_p=diffuse)
     profile = free() if free is not None else None
     chosen = candidates(search, effect_names)
     progress.stage(f"{label}: fitting {len(chosen)} effects", _evaluations(chosen))
     fits = name_effects(search, measured, before, effect_names, alpha, progress, profile) \
         if effect_names is None or len(effect_names) else []
-    return choose(before, fits)
+    chosen_round = choose(before, fits)
+    if diffuse is None:
+        return chosen_round
+    return replace(chosen_round, diffuse_p=diffuse, verdict=(
+        f"no condition is significant, but D = {before.D:.1f} is beyond chance (goodness-of-fit p = {diffuse:.2g}): "
+        f"{chosen_round.verdict}"))
 
 
 def choose(before: Comparison, fits: list[EffectFit]) -> Round:
@@ -438,7 +459,7 @@ def _restart(initial: Evaluator, measured: Measured, done: list[Round], current:
         chosen = edged
         starts = [(None, list(fits), edged)] + [(None, [*fits[:j], basin, *fits[j + 1:]], None)
                                                 for j, f in enumerate(fits) for basin in f.basins()[:BASINS]]
-    elif current.added is None and current.before.significant:
+    elif current.added is None and current.gap:
         chosen = next((f for f in current.fits if not f.screened and not f.at_edge), None)
         if chosen is None or not chosen.lowers():
             return None
