@@ -52,11 +52,11 @@ SHORT: dict[tuple[str, str], str] = {
         "named as fixation error (per-fixation scatter alike) and a decentred pupil as its twin, the decentred "
         "cornea; the corneal index and the pupil ellipse open no gap in gaze errors"),
     ("guestrin2006-tables", "pairs_in_order"): (
-        "4 of 10, 4 of the 8 visible: a pupil shift, the head roll's mimic in gaze errors, is named beside a "
+        "5 of 10, 5 of the 8 visible: a pupil shift, the head roll's mimic in gaze errors, is named beside a "
         "screen tilt, and beside an astigmatism leaves a spread gap ('none explains'); an asphericity and a "
         "tangential distortion are both named, out of order (the fitted distortion alone leaves more of D than the "
-        "asphericity alone, though alone in the hidden data it opens the larger gap); 3 name one effect of two, "
-        "two of them beside the invisible corneal index"),
+        "asphericity alone, though alone in the hidden data it opens the larger gap); 2 name the one visible "
+        "effect beside the invisible corneal index"),
     ("guestrin2006-tables", "outside_none_explains"): (
         "2 of 4: feature noise is explained by fixation error, a pupil change by a pupil shift (without the pupil's "
         "size, its change is its centre's shift)"),
@@ -75,14 +75,14 @@ SHORT: dict[tuple[str, str], str] = {
         "errors), a decentred pupil removed with its twin and the corneal index open no significant gap ('no gap')"),
 }
 
-#: setting -> rate -> hits the CI run of the 24th session's code measured (docs/blind-trials.md), for the rates whose
+#: setting -> rate -> hits the CI run of the 25th session's code measured (docs/blind-trials.md), for the rates whose
 #: trial count is fixed. A strict xfail in `SHORT` catches a rate that reaches its target, not a count that falls
 #: short further; `test_no_count_falls_below_its_record` does. `SLACK` trials below the record are let pass: another
 #: machine's floating point may tip a trial that sits at a decision's boundary.
 RECORD: dict[str, dict[str, int]] = {
     "guestrin2006-recordings": {"singles_named": 20, "pairs_in_order": 7, "outside_none_explains": 4},
     "blignaut2014-recordings": {"singles_named": 9, "pairs_in_order": 2, "outside_none_explains": 2},
-    "guestrin2006-tables": {"singles_named": 16, "pairs_in_order": 4, "outside_none_explains": 2},
+    "guestrin2006-tables": {"singles_named": 16, "pairs_in_order": 5, "outside_none_explains": 2},
     "blignaut2014-tables": {"singles_named": 6, "pairs_in_order": 0, "outside_none_explains": 1},
 }
 SLACK = 1
