@@ -348,8 +348,7 @@ def run_discrepancy(measured: Measured, *, eyes: EyeModel, search_eyes: EyeModel
         progress.advance(1)
     before, after = find(show_before, measured, alpha), find(show_after, measured, alpha)
     k_total = sum(len(a.effect.fitted) for a in added)
-    gof = permutation_gof(search.base_metrics, measured, search.experiment.reference, final.D) if added else None
-    gof = final.gof_p(k_total) if gof is None else gof
+    gof = _gof(search, measured, final, k_total) if added else None
     outcome, reason = decide(done, final, after, k_total, gof)
     named = []
     if outcome == "explained":
@@ -387,6 +386,13 @@ def decide(rounds: list[Round], final: Comparison, show_after: Comparison, k_tot
                          f"over {final.n_terms} terms, goodness-of-fit p = {gof:.2g}")
 
 
+def _gof(model: Evaluator, measured: Measured, comparison: Comparison, k: int) -> float:
+    """The goodness-of-fit p of `model`'s D (`comparison`, k parameters fitted): the permutation test where every
+    measured condition has per-subject values (`permutation_gof`), else P(chi-square(n_terms - k) >= D)."""
+    p = permutation_gof(model.base_metrics, measured, model.experiment.reference, comparison.D)
+    return comparison.gof_p(k) if p is None else p
+
+
 def _profile(initial: Evaluator, measured: Measured, added: list[Applied], progress: Progress) -> Profile:
     """The linear model of the added effects' parameters near their fits (`eyehil.analysis.discrepancy.profile`)."""
     points, spans, lo, hi = probes(added)
@@ -403,8 +409,7 @@ def _round(search: Evaluator, measured: Measured, effect_names, alpha, progress,
     before = find(search, measured, alpha)
     diffuse = None
     if not before.significant:
-        diffuse = permutation_gof(search.base_metrics, measured, search.experiment.reference, before.D)
-        diffuse = before.gof_p(k) if diffuse is None else diffuse
+        diffuse = _gof(search, measured, before, k)
         if not diffuse < alpha:
             return Round(before, [], None, f"no significant gap (nor D as a whole: goodness-of-fit p = {diffuse:.2g})"
                                            ": nothing to add", diffuse_p=diffuse)
