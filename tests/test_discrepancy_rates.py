@@ -52,11 +52,11 @@ SHORT: dict[tuple[str, str], str] = {
         "named as fixation error (per-fixation scatter alike) and a decentred pupil as its twin, the decentred "
         "cornea; the corneal index and the pupil ellipse open no gap in gaze errors"),
     ("guestrin2006-tables", "pairs_in_order"): (
-        "5 of 10, 5 of the 8 visible: a pupil shift, the head roll's mimic in gaze errors, is named beside a "
-        "screen tilt, and beside an astigmatism leaves a spread gap ('none explains'); an asphericity and a "
-        "tangential distortion are both named, out of order (the fitted distortion alone leaves more of D than the "
-        "asphericity alone, though alone in the hidden data it opens the larger gap); 2 name the one visible "
-        "effect beside the invisible corneal index"),
+        "6 of 10, 6 of the 8 visible: a pupil shift, the head roll's mimic in gaze errors, is named beside a "
+        "screen tilt, and the data prefer it (backfitted beside the tilt, D + 2k 28.6 against the roll's 31.9); an "
+        "asphericity and a tangential distortion are both named, out of order (the fitted distortion alone leaves "
+        "more of D than the asphericity alone, though alone in the hidden data it opens the larger gap); 2 name "
+        "the one visible effect beside the invisible corneal index"),
     ("guestrin2006-tables", "outside_none_explains"): (
         "2 of 4: feature noise is explained by fixation error, a pupil change by a pupil shift (without the pupil's "
         "size, its change is its centre's shift)"),
@@ -82,7 +82,7 @@ SHORT: dict[tuple[str, str], str] = {
 RECORD: dict[str, dict[str, int]] = {
     "guestrin2006-recordings": {"singles_named": 20, "pairs_in_order": 7, "outside_none_explains": 4},
     "blignaut2014-recordings": {"singles_named": 9, "pairs_in_order": 2, "outside_none_explains": 2},
-    "guestrin2006-tables": {"singles_named": 16, "pairs_in_order": 5, "outside_none_explains": 2},
+    "guestrin2006-tables": {"singles_named": 16, "pairs_in_order": 6, "outside_none_explains": 2},
     "blignaut2014-tables": {"singles_named": 6, "pairs_in_order": 0, "outside_none_explains": 1},
 }
 SLACK = 1

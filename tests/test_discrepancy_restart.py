@@ -140,3 +140,29 @@ def test_a_gap_spread_over_every_condition_opens_a_round() -> None:
     assert [a.effect.name for a in result.named] == ["camera_bump", "corneal_asphericity"]
     found = {a.effect.name: a.values for a in result.added}
     assert found["corneal_asphericity"]["delta_q"] == pytest.approx(0.3207, abs=0.06)
+
+
+def test_before_none_explains_a_contender_in_place_of_a_mimic_explains(monkeypatch) -> None:
+    """Pair 4: round 1 adds a pupil shift, the hidden head roll's mimic in gaze errors, and round 2 the corneal
+    astigmatism. Their model scores best on the search eyes (D + 2k 23.9, against 35.5 with the hidden effects at
+    their hidden values) but leaves a gap in the show eyes' spread at H2: "none explains". With round 1's contender,
+    the head roll, in the shift's place (`workflow._explain`) the data are explained, and the names come in order.
+    The level is the whole catalogue's, as in the trial."""
+    n = len(catalogue("guestrin2006"))
+    monkeypatch.setattr(workflow, "add_level", lambda _: 1.0 - workflow.ALPHA_ADD / n)
+    hidden = [Applied.of(effects.get("corneal_astigmatism"), anterior_j0_d=0.7676, anterior_j45_d=0.5053),
+              Applied.of(effects.get("head_roll"), roll_deg=4.346)]
+    measured, model = _trial(4, hidden)
+    names = ["pupil_shift", "feature_noise", "head_roll", "corneal_astigmatism", "screen_tilt"]
+    result = run_discrepancy(measured, eyes=model, search_eyes=model[:16], effect_names=names, rounds=2, workers=2)
+    first, second = result.rounds
+    assert first.fits[0].effect.name == "pupil_shift"  # round 1's own pick, the mimic
+    assert first.added.effect.name == "head_roll" and "in its place it explains the data" in first.verdict
+    assert "leaves a gap (significant gaps left on the show eyes" in first.verdict
+    assert second.added.effect.name == "corneal_astigmatism"
+    assert result.outcome == "explained", result.reason
+    assert [a.effect.name for a in result.named] == ["head_roll", "corneal_astigmatism"]
+    found = {a.effect.name: a.values for a in result.added}
+    assert found["head_roll"]["roll_deg"] == pytest.approx(4.346, abs=0.5)
+    # the shift scores better on the search eyes, so it is not a rival (within 2 of the roll) but listed beside it
+    assert first.backfitted["pupil_shift"] < first.backfitted["head_roll"] and "pupil_shift" not in first.rivals
