@@ -579,7 +579,7 @@ def _explain(initial: Evaluator, show: Evaluator, measured: Measured, done: list
         gof = _gof(model, measured, final, k)
         outcome, reason = decide(rounds, final, after, k, gof)
         if outcome == "explained":
-            best = _Model(rounds, trial, trial_fits, model, final, after, gof, reason, k)
+            best = _Model(rounds, trial, trial_fits, model, final, after, gof, reason)
     return best
 
 
@@ -594,7 +594,7 @@ def _own(done: Round) -> EffectFit:
 class _Model:
     """A model `_explain` keeps: the rounds (one with a contender in place of its added effect), the effects and
     their fits, the model's evaluator and comparisons (search eyes, show eyes), its goodness of fit and the
-    outcome's reason; k its fitted parameters."""
+    outcome's reason."""
 
     rounds: list[Round]
     added: list[Applied]
@@ -604,7 +604,11 @@ class _Model:
     after: Comparison
     gof: float
     reason: str
-    k: int
+
+    @property
+    def k(self) -> int:
+        """The model's fitted parameters."""
+        return sum(f.k for f in self.fits)
 
 
 def _drop_off(initial: Evaluator, search: Evaluator, added: list[Applied], fits: list[EffectFit], done: list[Round]
