@@ -32,6 +32,7 @@ from eyehil.analysis.discrepancy.measured import load_recordings
 from eyehil.analysis.discrepancy.metrics import Evaluator, Memo
 from eyehil.analysis.discrepancy.recording import write_recording
 from eyehil.analysis.discrepancy.report import render_markdown
+from eyehil.analysis.discrepancy.rounds import find
 from eyehil.analysis.discrepancy.search import (
     grid_minimum,
     max_evaluations,
@@ -50,7 +51,7 @@ from eyehil.analysis.discrepancy.stats import (
     resampled_gap_measure,
     term_covariance,
 )
-from eyehil.analysis.discrepancy.workflow import find, hidden_measured, run_discrepancy
+from eyehil.analysis.discrepancy.workflow import hidden_measured, run_discrepancy
 from eyehil.analysis.study import experiments
 from eyehil.cli import main
 from eyehil.emulator import effects
@@ -265,7 +266,7 @@ def test_a_fit_at_an_edge_does_not_hide_the_next_candidate(monkeypatch) -> None:
     screened candidate, whose narrow bowl the 5-node screen barely sees (a head roll of 2 deg, D 30); the round adds
     it and reports the edge fit as not added. Without the wave the head roll stays screened at D 95."""
     from eyehil.analysis.discrepancy import search
-    from eyehil.analysis.discrepancy.workflow import choose
+    from eyehil.analysis.discrepancy.rounds import choose
 
     def landscape(batch):
         out = []
@@ -303,8 +304,8 @@ def test_a_fit_at_an_edge_does_not_hide_the_next_candidate(monkeypatch) -> None:
 
 def test_rivals_are_the_candidates_that_fit_as_well_as_the_added_effect() -> None:
     """D + 2k within 2 of the added fit's (and a significant drop of D): a rival; further: not."""
+    from eyehil.analysis.discrepancy.rounds import Round
     from eyehil.analysis.discrepancy.search import EffectFit
-    from eyehil.analysis.discrepancy.workflow import Round
 
     def fit(name: str, D: float) -> EffectFit:
         e = effects.get(name)
@@ -321,8 +322,8 @@ def test_a_round_adds_its_best_of_many_null_candidates_at_the_family_wise_level(
     """With nothing left to explain, each candidate's drop of D is chi-square(k) (Wilks); the best of 21 passes
     a per-candidate 95 % test in most rounds (1 - 0.95^21 = 66 %), and the Bonferroni level of `add_level` holds the
     rate of spurious additions at 5 %."""
+    from eyehil.analysis.discrepancy.rounds import add_level, choose
     from eyehil.analysis.discrepancy.search import EffectFit
-    from eyehil.analysis.discrepancy.workflow import add_level, choose
 
     rng = np.random.default_rng(5)
     chosen = [effects.get(n) for n in effects.names()][:21]
@@ -570,7 +571,7 @@ def test_a_gap_in_d_alone_is_a_gap() -> None:
     nothing there ends "none explains", not "no gap"."""
     from types import SimpleNamespace
 
-    from eyehil.analysis.discrepancy.workflow import Round, decide
+    from eyehil.analysis.discrepancy.rounds import Round, decide
 
     quiet = SimpleNamespace(significant=[], alpha=0.05, D=30.0)
     diffuse = Round(quiet, [], None, "nothing passes", diffuse_p=0.01)  # type: ignore[arg-type]
@@ -669,7 +670,7 @@ def test_two_hidden_effects_are_named_in_order_of_size(hidden_eyes) -> None:
 
 
 def test_the_last_rounds_contenders_are_backfitted_in_its_place_and_the_best_kept_with_its_rivals(hidden_eyes) -> None:
-    from eyehil.analysis.discrepancy.workflow import RIVAL_SCORE
+    from eyehil.analysis.discrepancy.rounds import RIVAL_SCORE
 
     hidden = [effects.parse("lens_distortion=-1.9"), effects.parse("pupil_decentre=-0.3,-0.2")]
     measured = hidden_measured(hidden, eyes=hidden_eyes, seed=5)

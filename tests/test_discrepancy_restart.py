@@ -1,5 +1,5 @@
-"""A later round fitted again from other starts of the earlier effects (`workflow._restart`), and the backfit's joint
-move (`workflow._polish`): the two blind pair trials of Guestrin 2006's gaze-error tables that ended "none explains"
+"""A later round fitted again from other starts of the earlier effects (`refit.restart`), and the backfit's joint
+move (`refit._polish`): the two blind pair trials of Guestrin 2006's gaze-error tables that ended "none explains"
 before them (6 and 1, docs/blind-trials.md, 24th session); and a later round that searches a gap no single condition
 shows (`Round.diffuse_p`, pair 2, 25th session). Each with the trials' eyes and hidden values and the catalogue cut
 to the effects that matter, for speed."""
@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from eyehil.analysis.discrepancy import workflow
+from eyehil.analysis.discrepancy import rounds
 from eyehil.analysis.discrepancy.search import NODES, EffectFit
 from eyehil.analysis.discrepancy.trials import catalogue, model_eyes
 from eyehil.analysis.discrepancy.workflow import hidden_measured, run_discrepancy
@@ -59,7 +59,8 @@ def test_a_fit_is_off_where_the_parameters_that_can_switch_it_off_are_neutral() 
 
 
 def test_an_added_effect_refitted_to_do_nothing_leaves_the_model_and_its_round_says_so() -> None:
-    from eyehil.analysis.discrepancy.workflow import Round, _drop_off
+    from eyehil.analysis.discrepancy.refit import drop_off
+    from eyehil.analysis.discrepancy.rounds import Round
 
     def fit(name: str, **values: float) -> EffectFit:
         e = effects.get(name)
@@ -72,7 +73,7 @@ def test_an_added_effect_refitted_to_do_nothing_leaves_the_model_and_its_round_s
     noise, occlusion = fit("feature_noise", sigma_px=0.0), fit("glint_occlusion", bias=0.77, radius_px=9.1)
     rounds = [Round(None, [noise], noise, "added feature_noise"),  # type: ignore[arg-type]
               Round(None, [occlusion], occlusion, "added glint_occlusion")]  # type: ignore[arg-type]
-    added, fits, model, rounds = _drop_off(Initial(), None, [noise.applied, occlusion.applied],  # type: ignore[arg-type]
+    added, fits, model, rounds = drop_off(Initial(), None, [noise.applied, occlusion.applied],  # type: ignore[arg-type]
                                            [noise, occlusion], rounds)
     assert [a.effect.name for a in added] == model == ["glint_occlusion"] and fits == [occlusion]
     assert rounds[0].verdict.endswith("(feature_noise at its neutral value): dropped")
@@ -105,7 +106,7 @@ def test_a_round_that_passes_nothing_restarts_from_an_earlier_rounds_contender(m
     round's level is the whole catalogue's (`add_level` of its 20 candidates, as in the trial), for with 4 the
     tangential distortion passes beside the mimic and the backfit of contenders finds the asphericity anyway."""
     n = len(catalogue("guestrin2006"))
-    monkeypatch.setattr(workflow, "add_level", lambda _: 1.0 - workflow.ALPHA_ADD / n)
+    monkeypatch.setattr(rounds, "add_level", lambda _: 1.0 - rounds.ALPHA_ADD / n)
     hidden = [Applied.of(effects.get("corneal_asphericity"), delta_q=0.3813),
               Applied.of(effects.get("tangential_distortion"), p1=-0.03322, p2=-0.02478)]
     measured, model = _trial(1, hidden)
@@ -146,10 +147,10 @@ def test_before_none_explains_a_contender_in_place_of_a_mimic_explains(monkeypat
     """Pair 4: round 1 adds a pupil shift, the hidden head roll's mimic in gaze errors, and round 2 the corneal
     astigmatism. Their model scores best on the search eyes (D + 2k 23.9, against 35.5 with the hidden effects at
     their hidden values) but leaves a gap in the show eyes' spread at H2: "none explains". With round 1's contender,
-    the head roll, in the shift's place (`workflow._explain`) the data are explained, and the names come in order.
+    the head roll, in the shift's place (`refit.explain`) the data are explained, and the names come in order.
     The level is the whole catalogue's, as in the trial."""
     n = len(catalogue("guestrin2006"))
-    monkeypatch.setattr(workflow, "add_level", lambda _: 1.0 - workflow.ALPHA_ADD / n)
+    monkeypatch.setattr(rounds, "add_level", lambda _: 1.0 - rounds.ALPHA_ADD / n)
     hidden = [Applied.of(effects.get("corneal_astigmatism"), anterior_j0_d=0.7676, anterior_j45_d=0.5053),
               Applied.of(effects.get("head_roll"), roll_deg=4.346)]
     measured, model = _trial(4, hidden)

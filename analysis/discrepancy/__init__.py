@@ -2,6 +2,8 @@
 show the gap shrink (docs/discrepancy.md).
 
 - `workflow`: `run_discrepancy`, `hidden_measured` (the rounds of find, name, add; then show);
+- `rounds`: one round's find, name and add, and the outcome's criterion; `refit`: the added effects refitted
+  together, and other effects tried in their places;
 - `data`: measured data (per-condition errors of real subjects); `metrics`: the experiments compared;
 - `recording`: eyehil recordings as measured subjects (features per target and head position);
 - `measured`: measured data from a built-in set, a file or a folder of recordings (`--measured`);

@@ -81,7 +81,7 @@ def _search_eyes(asked: int | None, available: int) -> int:
 
 
 class BarProgress:
-    """One tqdm bar per stage of the workflow, on stderr (`eyehil.analysis.discrepancy.workflow.Progress`)."""
+    """One tqdm bar per stage of the workflow, on stderr (`eyehil.analysis.discrepancy.rounds.Progress`)."""
 
     def __init__(self, disable: bool):
         self.disable, self.bar = disable, None

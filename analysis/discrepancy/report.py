@@ -11,9 +11,10 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
+from eyehil.analysis.discrepancy.rounds import RIVAL_SCORE, Round
 from eyehil.analysis.discrepancy.search import EffectFit
 from eyehil.analysis.discrepancy.stats import Comparison
-from eyehil.analysis.discrepancy.workflow import RIVAL_SCORE, DiscrepancyResult, Round
+from eyehil.analysis.discrepancy.workflow import DiscrepancyResult
 from eyehil.emulator import effects as registry
 
 

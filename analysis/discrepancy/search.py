@@ -169,7 +169,7 @@ class EffectFit:
         """The screen's other basins: nodes of its grid (`NODES`) whose D is below every neighbour's (the 3^P - 1
         around) and below D0, more than 1.5 node steps from the fit, best first, each as a fit at its node (no
         sigma). A fit made beside another effect's
-        open gap can land in the wrong one (a screen tilt's sign; `workflow._restart`)."""
+        open gap can land in the wrong one (a screen tilt's sign; `refit.restart`)."""
         params = self.effect.fitted
         n, P = NODES[len(params)], len(params)
         if len(self.Ds) < n**P:

@@ -145,7 +145,7 @@ def recording_conditions(experiment: str) -> list[str]:
 def catalogue(experiment: str) -> list[str]:
     """The effects a trial of `experiment` hides and the workflow may name: the whole catalogue, less the effects
     acting only at validation head positions where the experiment has one head position (Blignaut 2014; the rule
-    of `workflow.candidates`)."""
+    of `rounds.candidates`)."""
     from eyehil.emulator import effects
 
     one_session = len(_host(experiment)[1].head_positions) < 2
