@@ -1,6 +1,6 @@
 """The added effects refitted together, and other effects tried in their places
 (`eyehil.analysis.discrepancy.workflow`, step 3): the first effect was fitted while the second's gap was still
-open, so each round's fit is biased by the rounds after it.
+open, so its fit is biased by the gap a later round takes up.
 
 - `settle`: each added effect refitted beside the others (`_backfit`), all moved together along their linear model
   while D falls (`_polish`), and refitted there.
