@@ -41,7 +41,6 @@ ALPHA_GOF = 0.01
 ALPHA_ADD = 0.05  # family-wise level of a round's addition, over its candidates (`add_level`)
 RIVAL_SCORE = 2.0  # D + 2k within this of the added effect's: a rival the data cannot tell from it (`Round.rivals`)
 CHUNK = 12  # points per evaluation call (each a batched calibration)
-OUTCOMES = ("no gap", "explained", "none explains")
 
 
 def add_level(n_candidates: int) -> float:
